@@ -1,0 +1,33 @@
+# Two entry points (see README): `make demo` and `make test`. Each builds .venv if needed.
+PYTHON ?= $(shell command -v python3.11 || command -v python3)
+VENV   ?= .venv
+BIN    := $(VENV)/bin
+STAMP  := $(VENV)/.installed
+
+.PHONY: demo test lint format bench clean
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	# The local CPU build of torch first: a plain `torch` requirement would fetch a CUDA build.
+	$(BIN)/pip install --quiet torch==2.13.0
+	$(BIN)/pip install --quiet -e '.[rl,dev]'
+	touch $(STAMP)
+
+demo: $(STAMP)
+	mkdir -p runs/demo
+	$(BIN)/wsp-env simulate --json runs/demo/simulate.json --plot runs/demo/simulate.png --trace runs/demo/trace
+
+test: $(STAMP)
+	$(BIN)/ruff check .
+	$(BIN)/ruff format --check .
+	$(BIN)/pytest -q
+
+format: $(STAMP)
+	$(BIN)/ruff check --fix .
+	$(BIN)/ruff format .
+
+bench: $(STAMP)
+	$(BIN)/wsp-env bench --json runs/bench.json
+
+clean:
+	rm -rf $(VENV) runs .pytest_cache .ruff_cache .hypothesis

@@ -1,0 +1,403 @@
+"""One control period of the coupled train / wheelset / brake / rail system, batched and compiled.
+
+Equations (per environment ``e``, axle ``k``, substep ``dt``):
+
+* demand  ``p_d(t) = p_max clip((t - t_delay) / t_rise, 0, 1)``;
+* valve   target ``u p_d`` (``u`` in [0, 1]) or *hold*; the command of the previous control period
+  acts for the valve dead time; the cylinder follows a first-order law integrated exactly
+  (``p <- target + (p - target) exp(-dt/tau)``) with a rate limit, faster when venting;
+* brake   ``T_b = gain (p - p_th)^+ * pad(V)`` (seed 000 Eqs. 3–6, linear form);
+* wheel   ``J domega/dt = F r - T_b`` with ``F = mu N`` from ``adhesion.adhesion``;
+  integrated **linearly-implicitly**: ``domega = dt (F r - T_b) / (J + dt r D)`` with
+  ``D = r N max(0, dmu/dxi / V + dmu/dw) = -dF/domega`` (its stabilising part); the rising creep
+  slope, which makes the problem stiff (time constant < 1 ms at low speed), is then
+  unconditionally stable, while the physically unstable falling branch stays explicit.
+  The brake is a friction element: it can hold a stopped wheel, never turn it backwards;
+* train   ``M dV/dt = -sum F - (A + B V + C V^2) - M g sin(gradient)``, explicit (M >> J/r^2),
+  with the *same* linearised forces as the wheels, so the discrete energy balance
+  (kinetic energy = brake + sliding + resistance work) holds to round-off;
+* load    ``N_k = N_static,k + k_transfer,k * decel`` (quasi-static load transfer);
+  Kalker stiffness scales as ``N^(2/3)`` (Hertz);
+* rail    each axle reads the contamination of the rail cell under it and removes
+  ``1 - exp(-(E_slide / E_clean + pass_removal * ds) / dx)`` of it: trailing axles see the rail
+  the leading ones cleaned.
+
+``step_batch`` advances all environments by ``n_sub`` substeps; environments at standstill are
+left untouched. Serial and ``prange`` (two-core) variants share ``_step_env``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+from wsp_env.physics.adhesion import (
+    REC_BASIS_RAIL_METRE,
+    REC_BASIS_WHEEL_METRE,
+    adhesion,
+)
+from wsp_env.physics.layout import (
+    AA_ADH_INT,
+    AA_AIR_L,
+    AA_BRAKE_E,
+    AA_BRAKE_T,
+    AA_LEVEL_INT,
+    AA_LOCK_CUR,
+    AA_LOCK_MAX,
+    AA_SLIDE_E,
+    AA_SLIDE_INT,
+    AA_SLIDE_SQ_INT,
+    AA_VENT_CUR,
+    AA_VENT_MAX,
+    AP_BRAKE_GAIN,
+    AP_CYL_VOLUME_L,
+    AP_INERTIA,
+    AP_K_TRANSFER,
+    AP_MU_FACTOR,
+    AP_N_STATIC,
+    AP_OFFSET,
+    AP_P_THRESH,
+    AP_RADIUS,
+    AP_STIFF,
+    AS_CMD,
+    AS_CONT,
+    AS_DOMEGA,
+    AS_F,
+    AS_KW,
+    AS_MU,
+    AS_MU_LEVEL,
+    AS_N,
+    AS_OMEGA,
+    AS_P,
+    AS_RF_S1,
+    AS_RF_S2,
+    AS_TORQUE,
+    EA_GRADE_E,
+    EA_RESIST_E,
+    EP_C_BACKGROUND,
+    EP_CELL_DX,
+    EP_DAVIS_A,
+    EP_DAVIS_B,
+    EP_DAVIS_C,
+    EP_DEMAND_DELAY,
+    EP_DEMAND_RISE,
+    EP_E_CLEAN,
+    EP_FILL_DECAY,
+    EP_FILL_RATE,
+    EP_GRADE_ACC,
+    EP_INJ_LEVEL,
+    EP_INJ_UNTIL,
+    EP_LAW,
+    EP_LP0,
+    EP_LP1,
+    EP_LP2,
+    EP_LP3,
+    EP_MASS,
+    EP_MU_CLEAN,
+    EP_MU_CONT,
+    EP_N_SECTIONS,
+    EP_P_MAX,
+    EP_PAD_SCALE,
+    EP_PAD_SLOPE,
+    EP_PAD_VREF,
+    EP_PASS_REMOVAL,
+    EP_REC_BASIS,
+    EP_REC_GAIN,
+    EP_RF_A1,
+    EP_RF_A2,
+    EP_RF_B0,
+    EP_RF_B1,
+    EP_RF_B2,
+    EP_V_EPS,
+    EP_VALVE_DEAD,
+    EP_VENT_DECAY,
+    EP_VENT_RATE,
+    EP_W_LIM,
+    EP_W_MAX,
+    ES_DECEL,
+    ES_HEAD,
+    ES_STOPPED,
+    ES_T,
+    ES_T_STOP,
+    ES_V,
+    ES_X,
+)
+
+P_ATM_BAR = 1.01325
+LOCK_WHEEL_SPEED = 0.1  # m/s: a wheel slower than this while the train moves is "locked"
+LOCK_TRAIN_SPEED = 1.0  # m/s
+VENT_MARGIN_BAR = 0.005  # a valve is "venting" when its target lies this far below the pressure
+
+
+@njit(cache=True)
+def contamination_at(env_par, sections, e, x):
+    """Initial contamination level of the rail at position ``x`` (sections override background)."""
+    c = env_par[e, EP_C_BACKGROUND]
+    for s in range(int(env_par[e, EP_N_SECTIONS])):
+        if sections[e, s, 0] <= x < sections[e, s, 1]:
+            c = sections[e, s, 2]
+    return c
+
+
+@njit(cache=True)
+def _lay_cell(env_par, sections, env_state, field, e, cell):
+    dx = env_par[e, EP_CELL_DX]
+    c = contamination_at(env_par, sections, e, (cell + 0.5) * dx)
+    if env_state[e, ES_T] < env_par[e, EP_INJ_UNTIL]:
+        c = max(c, env_par[e, EP_INJ_LEVEL])
+    field[e, cell % field.shape[1]] = c
+
+
+@njit(cache=True)
+def reset_field(env_par, sections, env_state, field, e):
+    """Lay the rail under a train whose leading axle stands at ``env_state[e, ES_X]``."""
+    head = int(math.floor(env_state[e, ES_X] / env_par[e, EP_CELL_DX]))
+    for cell in range(head - field.shape[1] + 1, head + 1):
+        _lay_cell(env_par, sections, env_state, field, e, cell)
+    env_state[e, ES_HEAD] = head
+
+
+@njit(cache=True)
+def _advance_field(env_par, sections, env_state, field, e):
+    head = int(env_state[e, ES_HEAD])
+    front = int(math.floor(env_state[e, ES_X] / env_par[e, EP_CELL_DX]))
+    while head < front:
+        head += 1
+        _lay_cell(env_par, sections, env_state, field, e, head)
+    env_state[e, ES_HEAD] = head
+
+
+@njit(cache=True)
+def _step_env(
+    e,
+    n_sub,
+    dt,
+    cmd,
+    env_par,
+    axle_par,
+    sections,
+    env_state,
+    axle_state,
+    field,
+    env_acc,
+    axle_acc,
+):
+    if env_state[e, ES_STOPPED] > 0.0:
+        return
+    n_axles = axle_par.shape[1]
+    n_cells = field.shape[1]
+    mass = env_par[e, EP_MASS]
+    p_max = env_par[e, EP_P_MAX]
+    t_delay = env_par[e, EP_DEMAND_DELAY]
+    t_rise = env_par[e, EP_DEMAND_RISE]
+    fill_decay = env_par[e, EP_FILL_DECAY]
+    fill_step = env_par[e, EP_FILL_RATE] * dt
+    vent_decay = env_par[e, EP_VENT_DECAY]
+    vent_step = env_par[e, EP_VENT_RATE] * dt
+    dead = env_par[e, EP_VALVE_DEAD]
+    law = int(env_par[e, EP_LAW])
+    mu_clean = env_par[e, EP_MU_CLEAN]
+    mu_cont = env_par[e, EP_MU_CONT]
+    lp0 = env_par[e, EP_LP0]
+    lp1 = env_par[e, EP_LP1]
+    lp2 = env_par[e, EP_LP2]
+    lp3 = env_par[e, EP_LP3]
+    rec_gain = env_par[e, EP_REC_GAIN]
+    w_lim = env_par[e, EP_W_LIM]
+    w_span = env_par[e, EP_W_MAX] - w_lim
+    recovery_on = w_span > 0.0 and w_lim < 1e300
+    basis = int(env_par[e, EP_REC_BASIS])
+    b0 = env_par[e, EP_RF_B0]
+    b1 = env_par[e, EP_RF_B1]
+    b2 = env_par[e, EP_RF_B2]
+    a1 = env_par[e, EP_RF_A1]
+    a2 = env_par[e, EP_RF_A2]
+    e_clean = env_par[e, EP_E_CLEAN]
+    pass_removal = env_par[e, EP_PASS_REMOVAL]
+    dx = env_par[e, EP_CELL_DX]
+    v_eps = env_par[e, EP_V_EPS]
+    for j in range(n_sub):
+        v = env_state[e, ES_V]
+        t = env_state[e, ES_T]
+        x = env_state[e, ES_X]
+        _advance_field(env_par, sections, env_state, field, e)
+        if t_rise > 0.0:
+            frac = (t - t_delay) / t_rise
+        else:
+            frac = 1.0 if t >= t_delay else 0.0
+        p_d = p_max * min(1.0, max(0.0, frac))
+        decel = env_state[e, ES_DECEL]
+        v_ref = max(v, v_eps)
+        pad = env_par[e, EP_PAD_SCALE] * max(
+            0.2, 1.0 + env_par[e, EP_PAD_SLOPE] * (v - env_par[e, EP_PAD_VREF])
+        )
+        use_prev = j * dt < dead
+        force_sum = 0.0
+        for k in range(n_axles):
+            # --- pneumatics: valve command -> cylinder pressure ------------------------------
+            u = axle_state[e, k, AS_CMD] if use_prev else cmd[e, k]
+            p = axle_state[e, k, AS_P]
+            if u < 0.0:
+                target = min(p, p_d)
+            else:
+                target = min(u, 1.0) * p_d
+            venting = target < p - VENT_MARGIN_BAR
+            if target > p:
+                p_new = min(target + (p - target) * fill_decay, p + fill_step)
+            else:
+                p_new = max(target + (p - target) * vent_decay, p - vent_step)
+            if p_new < p:
+                axle_acc[e, k, AA_AIR_L] += axle_par[e, k, AP_CYL_VOLUME_L] * (p - p_new) / P_ATM_BAR
+            axle_state[e, k, AS_P] = p_new
+            torque = axle_par[e, k, AP_BRAKE_GAIN] * max(0.0, p_new - axle_par[e, k, AP_P_THRESH]) * pad
+            # --- contact: load, stiffness, rail under the axle ------------------------------
+            n_static = axle_par[e, k, AP_N_STATIC]
+            normal = max(0.05 * n_static, n_static + axle_par[e, k, AP_K_TRANSFER] * decel)
+            stiff = axle_par[e, k, AP_STIFF] * (normal / n_static) ** (2.0 / 3.0)
+            slot = int(math.floor((x - axle_par[e, k, AP_OFFSET]) / dx)) % n_cells
+            cont = field[e, slot]
+            factor = axle_par[e, k, AP_MU_FACTOR]
+            level = (mu_clean - (mu_clean - mu_cont) * cont) * factor
+            mu_rec = min(rec_gain * level, mu_clean * factor)
+            # --- creep ----------------------------------------------------------------------
+            r = axle_par[e, k, AP_RADIUS]
+            omega = axle_state[e, k, AS_OMEGA]
+            dv = v - omega * r
+            axi = abs(dv) / v_ref
+            w = abs(dv)
+            kw_eff = 0.0
+            if recovery_on:
+                if basis == REC_BASIS_RAIL_METRE:
+                    q = axi
+                elif basis == REC_BASIS_WHEEL_METRE:
+                    q = w / max(omega * r, v_eps)
+                else:
+                    q = w
+                power = abs(axle_state[e, k, AS_MU]) * normal * q
+                kw_in = min(1.0, max(0.0, (power - w_lim) / w_span))
+                kw = b0 * kw_in + axle_state[e, k, AS_RF_S1]
+                axle_state[e, k, AS_RF_S1] = b1 * kw_in - a1 * kw + axle_state[e, k, AS_RF_S2]
+                axle_state[e, k, AS_RF_S2] = b2 * kw_in - a2 * kw
+                axle_state[e, k, AS_KW] = kw
+                kw_eff = min(1.0, max(0.0, kw)) * cont
+            m, m_xi, m_w = adhesion(
+                law, axi, w, level, mu_rec, kw_eff, normal, stiff, lp0, lp1, lp2, lp3
+            )
+            sign = 1.0 if dv >= 0.0 else -1.0
+            force = sign * m * normal
+            damping = r * normal * max(0.0, m_xi / v_ref + m_w)
+            # --- linearly-implicit wheelset update --------------------------------------------
+            inertia = axle_par[e, k, AP_INERTIA]
+            d_omega = dt * (force * r - torque) / (inertia + dt * r * damping)
+            if omega + d_omega < 0.0:
+                d_omega = -omega  # the brake holds the wheel; it never turns it backwards
+            force_used = force - damping * d_omega
+            axle_state[e, k, AS_OMEGA] = omega + d_omega
+            axle_state[e, k, AS_DOMEGA] = d_omega
+            axle_state[e, k, AS_F] = force_used
+            axle_state[e, k, AS_TORQUE] = torque
+            axle_state[e, k, AS_MU] = force_used / normal
+            axle_state[e, k, AS_N] = normal
+            axle_state[e, k, AS_MU_LEVEL] = level
+            axle_state[e, k, AS_CONT] = cont
+            if venting:
+                axle_acc[e, k, AA_VENT_CUR] += dt
+                axle_acc[e, k, AA_VENT_MAX] = max(
+                    axle_acc[e, k, AA_VENT_MAX], axle_acc[e, k, AA_VENT_CUR]
+                )
+            else:
+                axle_acc[e, k, AA_VENT_CUR] = 0.0
+            force_sum += force_used
+        # --- train --------------------------------------------------------------------------
+        resist = 0.0
+        if v > 0.0:
+            resist = env_par[e, EP_DAVIS_A] + v * (
+                env_par[e, EP_DAVIS_B] + v * env_par[e, EP_DAVIS_C]
+            )
+        grade = mass * env_par[e, EP_GRADE_ACC]
+        v_new = v - dt * (force_sum + resist + grade) / mass
+        h = dt
+        stopped = v_new <= 0.0
+        if stopped:
+            h = dt * v / (v - v_new) if v > v_new else 0.0
+            v_new = 0.0
+        env_state[e, ES_DECEL] = (v - v_new) / h if h > 0.0 else env_state[e, ES_DECEL]
+        v_mid = 0.5 * (v + v_new)
+        env_state[e, ES_V] = v_new
+        env_state[e, ES_X] = x + v_mid * h
+        env_state[e, ES_T] = t + h
+        env_acc[e, EA_RESIST_E] += resist * v_mid * h
+        env_acc[e, EA_GRADE_E] += grade * v_mid * h
+        # --- work, sliding statistics and rail cleaning ----------------------------------------
+        for k in range(n_axles):
+            r = axle_par[e, k, AP_RADIUS]
+            inertia = axle_par[e, k, AP_INERTIA]
+            d_omega = axle_state[e, k, AS_DOMEGA]
+            omega_new = axle_state[e, k, AS_OMEGA]
+            omega_mid = omega_new - 0.5 * d_omega
+            force_used = axle_state[e, k, AS_F]
+            slide = v_mid - r * omega_mid
+            brake_torque = force_used * r - inertia * d_omega / dt
+            # the substep is cut at standstill: scale its work to the travelled fraction
+            axle_acc[e, k, AA_BRAKE_E] += brake_torque * omega_mid * dt * (h / dt)
+            slide_work = force_used * slide * h
+            axle_acc[e, k, AA_SLIDE_E] += slide_work
+            axle_acc[e, k, AA_SLIDE_INT] += slide * h
+            axle_acc[e, k, AA_SLIDE_SQ_INT] += slide * slide * h
+            if axle_state[e, k, AS_TORQUE] > 0.0:
+                axle_acc[e, k, AA_ADH_INT] += abs(force_used) / axle_state[e, k, AS_N] * h
+                axle_acc[e, k, AA_LEVEL_INT] += axle_state[e, k, AS_MU_LEVEL] * h
+                axle_acc[e, k, AA_BRAKE_T] += h
+            if omega_new * r < LOCK_WHEEL_SPEED and v > LOCK_TRAIN_SPEED:
+                axle_acc[e, k, AA_LOCK_CUR] += h
+                axle_acc[e, k, AA_LOCK_MAX] = max(
+                    axle_acc[e, k, AA_LOCK_MAX], axle_acc[e, k, AA_LOCK_CUR]
+                )
+            else:
+                axle_acc[e, k, AA_LOCK_CUR] = 0.0
+            slot = int(math.floor((x - axle_par[e, k, AP_OFFSET]) / dx)) % n_cells
+            removal = (max(slide_work, 0.0) / e_clean + pass_removal * v_mid * h) / dx
+            field[e, slot] *= math.exp(-removal)
+            if stopped:
+                # the brakes absorb what the wheels still spin with; everything comes to rest
+                axle_acc[e, k, AA_BRAKE_E] += 0.5 * inertia * omega_new * omega_new
+                axle_state[e, k, AS_OMEGA] = 0.0
+        if stopped:
+            env_state[e, ES_STOPPED] = 1.0
+            env_state[e, ES_T_STOP] = t + h
+            return
+
+
+@njit(cache=True)
+def _step_serial(n_sub, dt, cmd, env_par, axle_par, sections, env_state, axle_state, field, env_acc, axle_acc):
+    for e in range(env_par.shape[0]):
+        _step_env(e, n_sub, dt, cmd, env_par, axle_par, sections, env_state, axle_state, field, env_acc, axle_acc)
+
+
+@njit(cache=True, parallel=True)
+def _step_parallel(n_sub, dt, cmd, env_par, axle_par, sections, env_state, axle_state, field, env_acc, axle_acc):
+    for e in prange(env_par.shape[0]):
+        _step_env(e, n_sub, dt, cmd, env_par, axle_par, sections, env_state, axle_state, field, env_acc, axle_acc)
+
+
+PARALLEL_MIN_ENVS = 64  # below this, thread start-up costs more than it saves
+
+
+def step_batch(
+    n_sub: int,
+    dt: float,
+    cmd: np.ndarray,
+    env_par: np.ndarray,
+    axle_par: np.ndarray,
+    sections: np.ndarray,
+    env_state: np.ndarray,
+    axle_state: np.ndarray,
+    field: np.ndarray,
+    env_acc: np.ndarray,
+    axle_acc: np.ndarray,
+) -> None:
+    """Advance every environment by ``n_sub`` substeps of ``dt`` seconds, in place."""
+    fn = _step_parallel if env_par.shape[0] >= PARALLEL_MIN_ENVS else _step_serial
+    fn(n_sub, dt, cmd, env_par, axle_par, sections, env_state, axle_state, field, env_acc, axle_acc)
