@@ -13,7 +13,7 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from wsp_env.trace_io import RunRecord, _write_atomically
+from wsp_env.trace_io import RunRecord, write_atomically
 
 
 def _axle_colours(n_axles: int) -> list[Any]:
@@ -70,6 +70,6 @@ def plot_run(record: RunRecord, path: str | Path, title: str = "") -> Path:
             fig.savefig(fh, format="png", dpi=120)
 
         path.parent.mkdir(parents=True, exist_ok=True)
-        return _write_atomically(path, write, binary=True)
+        return write_atomically(path, write, binary=True)
     finally:
         fig.clear()

@@ -370,7 +370,7 @@ def _write_temp(target: Path, write: Callable[[IO[Any]], None], binary: bool = F
     return tmp_path
 
 
-def _write_atomically(target: Path, write: Callable[[IO[Any]], None], binary: bool = False) -> Path:
+def write_atomically(target: Path, write: Callable[[IO[Any]], None], binary: bool = False) -> Path:
     """Write ``target`` via a temp file in the same directory and ``os.replace``."""
     tmp = _write_temp(target, write, binary)
     try:

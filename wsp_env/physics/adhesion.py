@@ -44,7 +44,8 @@ is a documented choice (``REC_BASIS_*``), since the seed's units are ambiguous:
 
 * ``REC_BASIS_RAIL_METRE`` ``q = |xi|`` -> W in J per metre of rail (= N); literal Eq. 10 with
   creep referred to the train speed;
-* ``REC_BASIS_WHEEL_METRE`` ``q = |DV| / (omega r)`` -> J per metre of wheel tread, Eq. 9 as printed;
+* ``REC_BASIS_WHEEL_METRE`` ``q = |DV| / (omega r)`` -> J per metre of wheel tread, Eq. 9 as
+  printed;
 * ``REC_BASIS_SLIDING_POWER`` ``q = |DV|`` -> W in watts; W_lim/W_max read as 1.6 / 7.8 kW.
 """
 
@@ -83,7 +84,9 @@ def polach(axi, w, mu0, normal_N, stiff_N, kA, kS, A, B):
     ks_eps = kS * eps
     den = 1.0 + ka_eps * ka_eps
     h = (2.0 / math.pi) * (ka_eps / den + math.atan(ks_eps))
-    dh_deps = (2.0 / math.pi) * (kA * (1.0 - ka_eps * ka_eps) / (den * den) + kS / (1.0 + ks_eps * ks_eps))
+    dh_deps = (2.0 / math.pi) * (
+        kA * (1.0 - ka_eps * ka_eps) / (den * den) + kS / (1.0 + ks_eps * ks_eps)
+    )
     m = mu_w * h
     m_xi = mu_w * dh_deps * c
     dmuw_dw = -mu0 * (1.0 - A) * B * e_bw
@@ -101,7 +104,9 @@ def polach_shape(axi, mu_level, normal_N, stiff_N, kA, kS):
     ks_eps = kS * eps
     den = 1.0 + ka_eps * ka_eps
     s = (2.0 / math.pi) * (ka_eps / den + math.atan(ks_eps))
-    ds = (2.0 / math.pi) * (kA * (1.0 - ka_eps * ka_eps) / (den * den) + kS / (1.0 + ks_eps * ks_eps))
+    ds = (2.0 / math.pi) * (
+        kA * (1.0 - ka_eps * ka_eps) / (den * den) + kS / (1.0 + ks_eps * ks_eps)
+    )
     return s, ds * c
 
 
@@ -178,9 +183,7 @@ def recovered_shape(law, axi, mu_level, normal_N, stiff_N, p0, p1):
 
 
 @njit(cache=True)
-def adhesion(
-    law, axi, w, mu_level, mu_rec, k_w, normal_N, stiff_N, p0, p1, p2, p3
-):
+def adhesion(law, axi, w, mu_level, mu_rec, k_w, normal_N, stiff_N, p0, p1, p2, p3):
     """Degraded law blended toward the recovered curve by the filtered removal fraction ``k_w``.
 
     Returns (m, dm/d|xi|, dm/dw) — see the module docstring for the blend.

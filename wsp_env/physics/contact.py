@@ -241,7 +241,7 @@ def kalker_c11(a_over_b: ArrayLike, poisson: ArrayLike) -> FloatArray:
     return np.asarray(1.0 / inv, dtype=np.float64)
 
 
-def kalker_longitudinal_stiffness_N(  # noqa: N802 (unit suffix N = newtons)
+def kalker_longitudinal_stiffness_N(
     wheel_load_N: ArrayLike,
     wheel_radius_m: ArrayLike,
     rail_crown_radius_m: ArrayLike = 0.3,

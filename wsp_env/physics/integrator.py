@@ -61,6 +61,7 @@ from wsp_env.physics.layout import (
     AP_P_THRESH,
     AP_RADIUS,
     AP_STIFF,
+    AS_CELL,
     AS_CMD,
     AS_CONT,
     AS_DOMEGA,
@@ -153,7 +154,7 @@ def _lay_cell(env_par, sections, env_state, field, e, cell):
 @njit(cache=True)
 def reset_field(env_par, sections, env_state, field, e):
     """Lay the rail under a train whose leading axle stands at ``env_state[e, ES_X]``."""
-    head = int(math.floor(env_state[e, ES_X] / env_par[e, EP_CELL_DX]))
+    head = math.floor(env_state[e, ES_X] / env_par[e, EP_CELL_DX])
     for cell in range(head - field.shape[1] + 1, head + 1):
         _lay_cell(env_par, sections, env_state, field, e, cell)
     env_state[e, ES_HEAD] = head
@@ -162,7 +163,7 @@ def reset_field(env_par, sections, env_state, field, e):
 @njit(cache=True)
 def _advance_field(env_par, sections, env_state, field, e):
     head = int(env_state[e, ES_HEAD])
-    front = int(math.floor(env_state[e, ES_X] / env_par[e, EP_CELL_DX]))
+    front = math.floor(env_state[e, ES_X] / env_par[e, EP_CELL_DX])
     while head < front:
         head += 1
         _lay_cell(env_par, sections, env_state, field, e, head)
@@ -249,15 +250,23 @@ def _step_env(
             else:
                 p_new = max(target + (p - target) * vent_decay, p - vent_step)
             if p_new < p:
-                axle_acc[e, k, AA_AIR_L] += axle_par[e, k, AP_CYL_VOLUME_L] * (p - p_new) / P_ATM_BAR
+                axle_acc[e, k, AA_AIR_L] += (
+                    axle_par[e, k, AP_CYL_VOLUME_L] * (p - p_new) / P_ATM_BAR
+                )
             axle_state[e, k, AS_P] = p_new
-            torque = axle_par[e, k, AP_BRAKE_GAIN] * max(0.0, p_new - axle_par[e, k, AP_P_THRESH]) * pad
+            torque = (
+                axle_par[e, k, AP_BRAKE_GAIN] * max(0.0, p_new - axle_par[e, k, AP_P_THRESH]) * pad
+            )
             # --- contact: load, stiffness, rail under the axle ------------------------------
             n_static = axle_par[e, k, AP_N_STATIC]
             normal = max(0.05 * n_static, n_static + axle_par[e, k, AP_K_TRANSFER] * decel)
             stiff = axle_par[e, k, AP_STIFF] * (normal / n_static) ** (2.0 / 3.0)
-            slot = int(math.floor((x - axle_par[e, k, AP_OFFSET]) / dx)) % n_cells
-            cont = field[e, slot]
+            # an axle sees the rail as the axles ahead of it left it: read a cell once, on entry
+            cell = math.floor((x - axle_par[e, k, AP_OFFSET]) / dx)
+            if cell != axle_state[e, k, AS_CELL]:
+                axle_state[e, k, AS_CELL] = cell
+                axle_state[e, k, AS_CONT] = field[e, int(cell) % n_cells]
+            cont = axle_state[e, k, AS_CONT]
             factor = axle_par[e, k, AP_MU_FACTOR]
             level = (mu_clean - (mu_clean - mu_cont) * cont) * factor
             mu_rec = min(rec_gain * level, mu_clean * factor)
@@ -291,9 +300,23 @@ def _step_env(
             # --- linearly-implicit wheelset update --------------------------------------------
             inertia = axle_par[e, k, AP_INERTIA]
             d_omega = dt * (force * r - torque) / (inertia + dt * r * damping)
+            force_used = force - damping * d_omega
+            if (v - (omega + d_omega) * r) * dv < 0.0:
+                # The step crossed zero creepage, where the creep slope is steepest and the
+                # slope of the starting point (often saturated) says nothing: re-linearise at
+                # zero creepage (F = kappa * slip) and solve the implicit step there. Without
+                # this a wheel near standstill chatters between lock and overspeed.
+                _, s0, _ = adhesion(
+                    law, 0.0, 0.0, level, mu_rec, kw_eff, normal, stiff, lp0, lp1, lp2, lp3
+                )
+                kappa = normal * s0 / v_ref
+                omega_new = (inertia * omega / dt + kappa * v * r - torque) / (
+                    inertia / dt + kappa * r * r
+                )
+                d_omega = omega_new - omega
+                force_used = kappa * (v - omega_new * r)
             if omega + d_omega < 0.0:
                 d_omega = -omega  # the brake holds the wheel; it never turns it backwards
-            force_used = force - damping * d_omega
             axle_state[e, k, AS_OMEGA] = omega + d_omega
             axle_state[e, k, AS_DOMEGA] = d_omega
             axle_state[e, k, AS_F] = force_used
@@ -357,7 +380,7 @@ def _step_env(
                 )
             else:
                 axle_acc[e, k, AA_LOCK_CUR] = 0.0
-            slot = int(math.floor((x - axle_par[e, k, AP_OFFSET]) / dx)) % n_cells
+            slot = int(axle_state[e, k, AS_CELL]) % n_cells
             removal = (max(slide_work, 0.0) / e_clean + pass_removal * v_mid * h) / dx
             field[e, slot] *= math.exp(-removal)
             if stopped:
@@ -371,15 +394,45 @@ def _step_env(
 
 
 @njit(cache=True)
-def _step_serial(n_sub, dt, cmd, env_par, axle_par, sections, env_state, axle_state, field, env_acc, axle_acc):
+def _step_serial(
+    n_sub, dt, cmd, env_par, axle_par, sections, env_state, axle_state, field, env_acc, axle_acc
+):
     for e in range(env_par.shape[0]):
-        _step_env(e, n_sub, dt, cmd, env_par, axle_par, sections, env_state, axle_state, field, env_acc, axle_acc)
+        _step_env(
+            e,
+            n_sub,
+            dt,
+            cmd,
+            env_par,
+            axle_par,
+            sections,
+            env_state,
+            axle_state,
+            field,
+            env_acc,
+            axle_acc,
+        )
 
 
 @njit(cache=True, parallel=True)
-def _step_parallel(n_sub, dt, cmd, env_par, axle_par, sections, env_state, axle_state, field, env_acc, axle_acc):
+def _step_parallel(
+    n_sub, dt, cmd, env_par, axle_par, sections, env_state, axle_state, field, env_acc, axle_acc
+):
     for e in prange(env_par.shape[0]):
-        _step_env(e, n_sub, dt, cmd, env_par, axle_par, sections, env_state, axle_state, field, env_acc, axle_acc)
+        _step_env(
+            e,
+            n_sub,
+            dt,
+            cmd,
+            env_par,
+            axle_par,
+            sections,
+            env_state,
+            axle_state,
+            field,
+            env_acc,
+            axle_acc,
+        )
 
 
 PARALLEL_MIN_ENVS = 64  # below this, thread start-up costs more than it saves

@@ -95,7 +95,10 @@ AS_CONT = 9  # contamination level under the axle in the last substep
 AS_F = 10  # N, adhesion force of the last substep (linearised, as used by both equations)
 AS_DOMEGA = 11  # rad/s, change of omega in the last substep
 AS_TORQUE = 12  # N m, brake torque of the last substep
-N_AS = 13
+AS_CELL = 13  # index of the rail cell under the axle; AS_CONT is read once on entering it
+N_AS = 14
+
+NO_CELL = -1.0e18  # AS_CELL before the first substep
 
 # ---- accumulators ----------------------------------------------------------------------------
 EA_RESIST_E = 0  # J, running-resistance work

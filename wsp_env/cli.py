@@ -1,0 +1,207 @@
+"""``wsp-env`` command line: one subcommand per job, each with ``--json PATH``.
+
+User mistakes (bad config, argument, file) end with one line on stderr naming the file, field
+or argument, and exit status 2 — never a traceback, never a half-written output file.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from wsp_env.config import ConfigError, load_rail, load_vehicle
+from wsp_env.trace_io import write_atomically
+
+RAILS = ("dry", "wet", "soap", "oil", "leaves")
+
+
+class UserError(Exception):
+    """A mistake in the user's input; its message is printed as one line."""
+
+
+def write_json(path: str | Path, payload: dict[str, Any]) -> Path:
+    """Write ``payload`` as JSON through a temp file (never half-written)."""
+    target = Path(path)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    text = json.dumps(payload, indent=2, allow_nan=False, default=_json_default) + "\n"
+    return write_atomically(target, lambda fh: fh.write(text))
+
+
+def _json_default(obj: Any) -> Any:
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    raise TypeError(f"not JSON serialisable: {type(obj).__name__}")
+
+
+def _positive(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not (np.isfinite(v) and v > 0):
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text!r}")
+    return v
+
+
+def _nonneg(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not (np.isfinite(v) and v >= 0):
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {text!r}")
+    return v
+
+
+# ---- simulate -------------------------------------------------------------------------------
+
+
+def _add_simulate(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "simulate",
+        help="run one braking stop and report stopping distance, sliding, air",
+        description="One braking stop. The seed draws the rail's adhesion level and pattern "
+        "from that contaminant's distribution (configs/rails.yaml); --mu-contaminated and "
+        "--pattern fix them.",
+    )
+    p.add_argument("--vehicle", default="uic_z1", help="vehicle id or YAML path (uic_z1)")
+    p.add_argument("--speed-kmh", type=_positive, default=120.0, help="initial speed (120)")
+    p.add_argument("--rail", default="soap", choices=RAILS, help="rail condition (soap)")
+    p.add_argument("--rails-config", default=None, help="rail-condition table (YAML)")
+    p.add_argument("--policy", default="none", help="valve policy: none = full demand, no WSP")
+    p.add_argument("--seed", type=int, default=0, help="draws adhesion level and pattern (0)")
+    p.add_argument("--mu-contaminated", type=_positive, default=None, help="fix the level")
+    p.add_argument(
+        "--pattern", choices=("uniform", "step_up", "step_down", "patches"), default=None
+    )
+    p.add_argument("--demand", choices=("emergency", "service"), default="emergency")
+    p.add_argument("--json", dest="json_path", default=None, help="write the result here")
+    p.add_argument("--plot", default=None, help="write a PNG of speeds and pressures")
+    p.add_argument("--trace", default=None, help="write a wsp-trace/1 trace STEM.csv + .json")
+    p.add_argument("--sample-period-s", type=_positive, default=0.1, help="trace logger period")
+    p.add_argument("--speed-noise-kmh", type=_nonneg, default=0.1, help="trace sensor noise")
+    p.add_argument("--pressure-noise-bar", type=_nonneg, default=0.01, help="trace sensor noise")
+    p.add_argument("--dt-s", type=_positive, default=1e-3, help="physics substep (0.001)")
+    p.set_defaults(func=cmd_simulate)
+
+
+def cmd_simulate(args: argparse.Namespace) -> dict[str, Any]:
+    from wsp_env.runner import PHYSICS_POLICIES, run_stop, trace_metadata
+    from wsp_env.simulator import draw_run_setup
+    from wsp_env.trace_io import SensorModel, sample_run, write_trace
+
+    vehicle = load_vehicle(args.vehicle)
+    if args.speed_kmh > vehicle.max_speed_kmh:
+        raise UserError(
+            f"--speed-kmh: {args.speed_kmh:g} exceeds {vehicle.id}'s maximum "
+            f"{vehicle.max_speed_kmh:g} km/h"
+        )
+    if args.policy not in PHYSICS_POLICIES:
+        raise UserError(f"--policy: unknown policy {args.policy!r} (available: none)")
+    rail = load_rail(args.rail, args.rails_config)
+    rng = np.random.default_rng(args.seed)
+    fixed: dict[str, Any] = {"demand_fraction": 1.0 if args.demand == "emergency" else 0.85}
+    if args.pattern is not None:
+        rail = _with_pattern(rail, args.pattern)
+    setup = draw_run_setup(rail, rng, args.speed_kmh, **fixed)
+    if args.mu_contaminated is not None:
+        import dataclasses
+
+        setup = dataclasses.replace(setup, mu_contaminated=args.mu_contaminated)
+    metrics, record = run_stop(vehicle, setup, args.policy, dt_s=args.dt_s)
+    result = {
+        "vehicle": vehicle.id,
+        "rail": args.rail,
+        "policy": args.policy,
+        "seed": args.seed,
+        "mu_contaminated": setup.mu_contaminated,
+        "pattern_sections": [list(s) for s in setup.sections],
+        **metrics,
+    }
+    outputs = []
+    if args.plot:
+        from wsp_env.plotting import plot_run
+
+        title = f"{vehicle.name}, {args.speed_kmh:g} km/h, {args.rail}, policy {args.policy}"
+        outputs.append(plot_run(record, args.plot, title=title))
+    if args.trace:
+        sensors = SensorModel(
+            sample_period_s=args.sample_period_s,
+            speed_noise_kmh=args.speed_noise_kmh,
+            pressure_noise_bar=args.pressure_noise_bar,
+        )
+        columns = sample_run(record, sensors, np.random.default_rng([args.seed, 1]))
+        meta = trace_metadata(
+            vehicle,
+            setup,
+            args.rail,
+            args.sample_period_s,
+            f"simulated {vehicle.id} {args.rail} {args.speed_kmh:g} km/h seed {args.seed}",
+        )
+        outputs.extend(write_trace(args.trace, columns, meta))
+    result["outputs"] = [str(p) for p in outputs]
+    return result
+
+
+def _with_pattern(rail: Any, pattern: str) -> Any:
+    import dataclasses
+
+    return dataclasses.replace(rail, patterns={pattern: 1.0})
+
+
+def _print_simulate(result: dict[str, Any]) -> None:
+    print(
+        f"{result['vehicle']} on {result['rail']} (mu {result['mu_contaminated']:.3f}), "
+        f"policy {result['policy']}: stop {result['stopping_distance_m']:.1f} m in "
+        f"{result['stopping_time_s']:.1f} s, air {result['air_litres']:.1f} l, "
+        f"longest lock {result['max_lock_s']:.1f} s"
+    )
+    for i, a in enumerate(result["axles"], start=1):
+        print(
+            f"  axle {i}: sliding {a['mean_sliding_kmh']:5.2f} "
+            f"+- {a['std_sliding_kmh']:5.2f} km/h, "
+            f"adhesion used {a['mean_adhesion_used']:.3f}, sliding energy "
+            f"{a['sliding_energy_kJ']:.0f} kJ"
+        )
+    for p in result["outputs"]:
+        print(f"  wrote {p}")
+
+
+# ---- entry point ----------------------------------------------------------------------------
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="wsp-env", description="Wheel slide protection braking: simulate, evaluate, train."
+    )
+    sub = parser.add_subparsers(dest="command", required=True)
+    _add_simulate(sub)
+    return parser
+
+
+PRINTERS = {"simulate": _print_simulate}
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        result = args.func(args)
+        if getattr(args, "json_path", None):
+            write_json(args.json_path, result)
+    except (ConfigError, UserError, ValueError, OSError) as err:
+        print(f"wsp-env {args.command}: error: {err}", file=sys.stderr)
+        return 2
+    PRINTERS[args.command](result)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

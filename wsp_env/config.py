@@ -1,0 +1,407 @@
+"""Typed configuration: YAML files -> frozen dataclasses, validated on load.
+
+Every problem raises :class:`ConfigError` with one line that names the file, the field (as a
+dotted path) and what is wrong, e.g. ``configs/vehicles/x.yaml: brake.p_max_bar: must be > 0``.
+Unknown fields are errors too (a typo must not silently fall back to a default).
+
+Built-in configs live in the repository's ``configs/`` folder, installed as the package
+``wsp_env.configs``; a vehicle or rail can be given by id (``uic_z1``) or by a path to a file.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import math
+import types
+import typing
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+
+class ConfigError(ValueError):
+    """A configuration problem; ``str(err)`` is the one-line message for the user."""
+
+
+# ---- generic dataclass loading --------------------------------------------------------------
+
+
+def _check_number(value: Any, where: str, spec: dict[str, Any]) -> float:
+    if isinstance(value, str):  # YAML 1.1 reads "5.0e7" (no exponent sign) as a string
+        try:
+            value = float(value)
+        except ValueError:
+            raise ConfigError(f"{where}: expected a number, got {value!r}") from None
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ConfigError(f"{where}: expected a number, got {value!r}")
+    v = float(value)
+    if math.isnan(v):
+        raise ConfigError(f"{where}: is NaN")
+    if math.isinf(v) and not spec.get("inf", False):
+        raise ConfigError(f"{where}: must be finite")
+    if "gt" in spec and not v > spec["gt"]:
+        raise ConfigError(f"{where}: must be > {spec['gt']}, got {v:g}")
+    if "ge" in spec and not v >= spec["ge"]:
+        raise ConfigError(f"{where}: must be >= {spec['ge']}, got {v:g}")
+    if "le" in spec and not v <= spec["le"]:
+        raise ConfigError(f"{where}: must be <= {spec['le']}, got {v:g}")
+    return v
+
+
+def _convert(tp: Any, value: Any, where: str, spec: dict[str, Any]) -> Any:
+    origin = typing.get_origin(tp)
+    if origin in (typing.Union, types.UnionType):
+        args = [a for a in typing.get_args(tp) if a is not type(None)]
+        if value is None:
+            return None
+        return _convert(args[0], value, where, spec)
+    if dataclasses.is_dataclass(tp):
+        return from_dict(tp, value, where)
+    if origin is tuple:
+        item_tp = typing.get_args(tp)[0]
+        if not isinstance(value, list | tuple):
+            raise ConfigError(f"{where}: expected a list, got {value!r}")
+        if "len" in spec and len(value) != spec["len"]:
+            raise ConfigError(f"{where}: expected {spec['len']} items, got {len(value)}")
+        if spec.get("nonempty") and not value:
+            raise ConfigError(f"{where}: must not be empty")
+        return tuple(_convert(item_tp, v, f"{where}[{i}]", spec) for i, v in enumerate(value))
+    if origin is dict:
+        val_tp = typing.get_args(tp)[1]
+        if not isinstance(value, dict):
+            raise ConfigError(f"{where}: expected a mapping, got {value!r}")
+        return {str(k): _convert(val_tp, v, f"{where}.{k}", spec) for k, v in value.items()}
+    if tp is float:
+        return _check_number(value, where, spec)
+    if tp is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ConfigError(f"{where}: expected an integer, got {value!r}")
+        _check_number(value, where, spec)
+        return int(value)
+    if tp is str:
+        if not isinstance(value, str):
+            raise ConfigError(f"{where}: expected a string, got {value!r}")
+        if "choices" in spec and value not in spec["choices"]:
+            raise ConfigError(f"{where}: {value!r} is not one of {', '.join(spec['choices'])}")
+        return value
+    if tp is bool:
+        if not isinstance(value, bool):
+            raise ConfigError(f"{where}: expected true or false, got {value!r}")
+        return value
+    raise TypeError(f"unsupported config type {tp!r} at {where}")
+
+
+def from_dict(cls: type, data: Any, where: str = "") -> Any:
+    """Build dataclass ``cls`` from a mapping, checking names, types and ``metadata`` bounds."""
+    prefix = f"{where}." if where else ""
+    if not isinstance(data, dict):
+        raise ConfigError(f"{where or '(top level)'}: expected a mapping, got {data!r}")
+    hints = typing.get_type_hints(cls)
+    names = {f.name for f in dataclasses.fields(cls)}
+    unknown = sorted(set(data) - names)
+    if unknown:
+        raise ConfigError(
+            f"{prefix}{unknown[0]}: unknown field (allowed: {', '.join(sorted(names))})"
+        )
+    kwargs = {}
+    for f in dataclasses.fields(cls):
+        if f.name not in data:
+            if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
+                raise ConfigError(f"{prefix}{f.name}: missing required field")
+            continue
+        kwargs[f.name] = _convert(hints[f.name], data[f.name], prefix + f.name, dict(f.metadata))
+    obj = cls(**kwargs)
+    check = getattr(obj, "validate", None)
+    if check is not None:
+        check(where)
+    return obj
+
+
+def _pos(default: Any = dataclasses.MISSING, **extra: Any) -> Any:
+    return field(default=default, metadata={"gt": 0.0, **extra})
+
+
+def _nonneg(default: Any = dataclasses.MISSING, **extra: Any) -> Any:
+    return field(default=default, metadata={"ge": 0.0, **extra})
+
+
+# ---- vehicle --------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class CarConfig:
+    body_mass_kg: float = _pos()
+    cog_height_m: float = _pos()
+    bogies: tuple[int, ...] = field(metadata={"len": 2, "ge": 0})
+
+
+@dataclass(frozen=True)
+class BogieConfig:
+    position_m: float = _nonneg()
+    wheelbase_m: float = _pos()
+    frame_mass_kg: float = _pos()
+    frame_cog_height_m: float = _pos()
+    pivot_height_m: float = _pos()
+    n_axles: int = field(default=2, metadata={"ge": 1})
+
+
+@dataclass(frozen=True)
+class DiscChainConfig:
+    """Seed 000 Eqs. 3–6 (see ``physics.brake.DiscBrakeChain``)."""
+
+    thrust_area_cm2: float = _pos()
+    cylinder_spring_N: float = _nonneg()
+    cylinder_ratio: float = _pos()
+    cylinder_efficiency: float = _pos(le=1.0)
+    slack_adjuster_spring_N: float = _nonneg()
+    rear_nut_spring_N: float = _nonneg()
+    caliper_ratio: float = _pos()
+    caliper_efficiency: float = _pos(le=1.0)
+    pad_friction: float = _pos(le=1.0)
+    discs_per_axle: int = field(metadata={"ge": 1})
+    friction_radius_m: float = _pos()
+    transmission_ratio: float = _pos(default=1.0)
+
+
+@dataclass(frozen=True)
+class BrakeConfig:
+    p_max_bar: float = _pos()
+    cylinder_volume_l: float = _pos()
+    fill_tau_s: float = _nonneg()
+    fill_rate_bar_per_s: float = _pos()
+    vent_tau_s: float = _nonneg()
+    vent_rate_bar_per_s: float = _pos()
+    valve_dead_time_s: float = _nonneg()
+    demand_delay_s: float = _nonneg()
+    demand_rise_s: float = _nonneg()
+    torque_gain_Nm_per_bar: float | None = field(default=None, metadata={"gt": 0.0})
+    p_threshold_bar: float | None = field(default=None, metadata={"ge": 0.0})
+    disc_chain: DiscChainConfig | None = None
+    valve_group: str = field(default="axle", metadata={"choices": ("axle", "bogie")})
+    pad_speed_coeff_per_kmh: float = 0.0
+    pad_ref_speed_kmh: float = _nonneg(default=100.0)
+
+    def validate(self, where: str) -> None:
+        linear = self.torque_gain_Nm_per_bar is not None
+        if linear == (self.disc_chain is not None):
+            raise ConfigError(
+                f"{where}.torque_gain_Nm_per_bar: give either torque_gain_Nm_per_bar "
+                "(+ p_threshold_bar) or disc_chain, not both or neither"
+            )
+        if linear and self.p_threshold_bar is None:
+            raise ConfigError(
+                f"{where}.p_threshold_bar: missing (needed with torque_gain_Nm_per_bar)"
+            )
+
+    def linear_torque(self) -> tuple[float, float]:
+        """``(gain_Nm_per_bar, p_threshold_bar)`` of the brake torque."""
+        if self.disc_chain is not None:
+            from wsp_env.physics.brake import DiscBrakeChain
+
+            return DiscBrakeChain(**dataclasses.asdict(self.disc_chain)).linear_form()
+        assert self.torque_gain_Nm_per_bar is not None and self.p_threshold_bar is not None
+        return self.torque_gain_Nm_per_bar, self.p_threshold_bar
+
+
+@dataclass(frozen=True)
+class ResistanceConfig:
+    """Davis running resistance ``A + B v + C v^2`` of the whole train (v in m/s)."""
+
+    a_N: float = _nonneg()
+    b_N_per_mps: float = _nonneg()
+    c_N_per_mps2: float = _nonneg()
+
+
+@dataclass(frozen=True)
+class ContactConfig:
+    rail_crown_radius_m: float = _pos(default=0.3)
+    wheel_transverse_radius_m: float = field(default=math.inf, metadata={"gt": 0.0, "inf": True})
+    youngs_modulus_Pa: float = _pos(default=2.1e11)
+    poisson: float = field(default=0.3, metadata={"gt": 0.0, "le": 0.49})
+
+
+@dataclass(frozen=True)
+class VehicleConfig:
+    id: str
+    name: str
+    source: str
+    max_speed_kmh: float = _pos()
+    wheel_radius_m: float = _pos()
+    wheelset_inertia_kgm2: float = _pos()
+    wheelset_mass_kg: float = _pos()
+    cars: tuple[CarConfig, ...] = field(metadata={"nonempty": True})
+    bogies: tuple[BogieConfig, ...] = field(metadata={"nonempty": True})
+    brake: BrakeConfig
+    resistance: ResistanceConfig
+    contact: ContactConfig = field(default_factory=ContactConfig)
+
+    def validate(self, where: str) -> None:
+        prefix = f"{where}." if where else ""
+        n = len(self.bogies)
+        for i, car in enumerate(self.cars):
+            f, r = car.bogies
+            if f >= n or r >= n:
+                raise ConfigError(f"{prefix}cars[{i}].bogies: index out of range (0..{n - 1})")
+            if self.bogies[r].position_m <= self.bogies[f].position_m:
+                raise ConfigError(f"{prefix}cars[{i}].bogies: rear bogie must stand behind front")
+        pos = [b.position_m for b in self.bogies]
+        if any(b <= a for a, b in itertools.pairwise(pos)):
+            raise ConfigError(f"{prefix}bogies: positions must increase in running order")
+        carried = {b for car in self.cars for b in car.bogies}
+        if carried != set(range(n)):
+            missing = sorted(set(range(n)) - carried)
+            raise ConfigError(f"{prefix}bogies[{missing[0]}]: carries no car body")
+
+    @property
+    def n_axles(self) -> int:
+        return sum(b.n_axles for b in self.bogies)
+
+
+# ---- rail / contaminant ---------------------------------------------------------------------
+
+LAWS = ("polach", "polach_simple", "seed002")
+CONTAMINANTS = ("dry", "wet", "soap", "oil", "leaves")
+PATTERNS = ("uniform", "step_up", "step_down", "patches")
+
+
+@dataclass(frozen=True)
+class RecoveryConfig:
+    """Seed 002 Eqs. 9–14. ``w_lim = inf`` disables recovery."""
+
+    w_lim: float = field(metadata={"ge": 0.0, "inf": True})
+    w_max: float = field(metadata={"gt": 0.0, "inf": True})
+    gain: float = field(default=1.25, metadata={"ge": 1.0})
+    tau_s: float = _pos(default=0.1)
+    zeta: float = _pos(default=1.0)
+    basis: str = field(
+        default="sliding_power",
+        metadata={"choices": ("rail_metre", "wheel_metre", "sliding_power")},
+    )
+
+    def validate(self, where: str) -> None:
+        if math.isfinite(self.w_lim) and not self.w_max > self.w_lim:
+            raise ConfigError(f"{where}.w_max: must exceed w_lim ({self.w_lim:g})")
+
+
+@dataclass(frozen=True)
+class RailConfig:
+    """One rail condition: creep law, friction levels, cleaning, recovery and its randomisation."""
+
+    law: str = field(metadata={"choices": LAWS})
+    law_params: dict[str, float]
+    mu_clean: float = _pos(le=1.0)
+    mu_contaminated: float = _pos(le=1.0)
+    mu_contaminated_range: tuple[float, ...] = field(metadata={"len": 2, "gt": 0.0, "le": 1.0})
+    contamination: float = field(metadata={"ge": 0.0, "le": 1.0})
+    clean_energy_J_per_m: float = field(metadata={"gt": 0.0, "inf": True})
+    pass_removal: float = field(default=0.0, metadata={"ge": 0.0, "le": 1.0})
+    recovery: RecoveryConfig = field(
+        default_factory=lambda: RecoveryConfig(w_lim=math.inf, w_max=math.inf)
+    )
+    patterns: dict[str, float] = field(default_factory=lambda: {"uniform": 1.0})
+
+    _LAW_KEYS: typing.ClassVar[dict[str, tuple[str, ...]]] = {
+        "polach": ("kA", "kS", "A", "B"),
+        "polach_simple": ("K", "K_rozv_per_kmh"),
+        "seed002": ("K_red", "lambda"),
+    }
+
+    def validate(self, where: str) -> None:
+        prefix = f"{where}." if where else ""
+        need = self._LAW_KEYS[self.law]
+        for key in need:
+            if key not in self.law_params:
+                raise ConfigError(f"{prefix}law_params.{key}: missing for law {self.law}")
+        for key in self.law_params:
+            if key not in need:
+                raise ConfigError(f"{prefix}law_params.{key}: unknown for law {self.law}")
+            if key != "A" and not self.law_params[key] >= 0:
+                raise ConfigError(f"{prefix}law_params.{key}: must be >= 0")
+        lo, hi = self.mu_contaminated_range
+        if lo > hi:
+            raise ConfigError(f"{prefix}mu_contaminated_range: low end exceeds high end")
+        for name, weight in self.patterns.items():
+            if name not in PATTERNS:
+                raise ConfigError(
+                    f"{prefix}patterns.{name}: unknown (one of {', '.join(PATTERNS)})"
+                )
+            if weight < 0:
+                raise ConfigError(f"{prefix}patterns.{name}: weight must be >= 0")
+        if not sum(self.patterns.values()) > 0:
+            raise ConfigError(f"{prefix}patterns: weights must not all be zero")
+
+    def law_vector(self) -> tuple[float, float, float, float]:
+        vals = [self.law_params[k] for k in self._LAW_KEYS[self.law]]
+        return tuple(vals + [0.0] * (4 - len(vals)))  # type: ignore[return-value]
+
+
+# ---- file loading ---------------------------------------------------------------------------
+
+
+def _configs_root() -> Path:
+    """The built-in configs folder (``wsp_env.configs`` package, or ./configs in a checkout)."""
+    try:
+        return Path(str(resources.files("wsp_env.configs")))
+    except ModuleNotFoundError:  # running from a source tree without installing
+        return Path(__file__).resolve().parent.parent / "configs"
+
+
+def read_yaml(path: Path) -> Any:
+    try:
+        text = path.read_text()
+    except OSError as err:
+        raise ConfigError(f"{path}: cannot read ({err.strerror})") from None
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError as err:
+        mark = getattr(err, "problem_mark", None)
+        line = f"line {mark.line + 1}: " if mark is not None else ""
+        raise ConfigError(f"{path}: {line}invalid YAML") from None
+
+
+def _resolve(name_or_path: str | Path, folder: str) -> Path:
+    p = Path(name_or_path)
+    if p.suffix in (".yaml", ".yml") or p.exists():
+        if not p.exists():
+            raise ConfigError(f"{p}: no such file")
+        return p
+    builtin = _configs_root() / folder / f"{name_or_path}.yaml"
+    if not builtin.exists():
+        known = sorted(q.stem for q in (_configs_root() / folder).glob("*.yaml"))
+        raise ConfigError(f"{folder}: unknown id {str(name_or_path)!r} (known: {', '.join(known)})")
+    return builtin
+
+
+def load_vehicle(name_or_path: str | Path) -> VehicleConfig:
+    """Load and validate a vehicle config by id (``uic_z1``) or YAML path."""
+    path = _resolve(name_or_path, "vehicles")
+    try:
+        return from_dict(VehicleConfig, read_yaml(path))
+    except ConfigError as err:
+        raise ConfigError(f"{path}: {err}") from None
+
+
+def load_rails(path: str | Path | None = None) -> dict[str, RailConfig]:
+    """Load the rail-condition table (``configs/rails.yaml`` unless a path is given)."""
+    p = Path(path) if path is not None else _configs_root() / "rails.yaml"
+    data = read_yaml(p)
+    if not isinstance(data, dict):
+        raise ConfigError(f"{p}: expected a mapping of rail conditions")
+    out = {}
+    for name, body in data.items():
+        try:
+            out[str(name)] = from_dict(RailConfig, body, str(name))
+        except ConfigError as err:
+            raise ConfigError(f"{p}: {err}") from None
+    return out
+
+
+def load_rail(name: str, path: str | Path | None = None) -> RailConfig:
+    rails = load_rails(path)
+    if name not in rails:
+        raise ConfigError(f"rail: unknown condition {name!r} (known: {', '.join(sorted(rails))})")
+    return rails[name]
