@@ -73,7 +73,7 @@ REC_BASIS_NAMES = {
 KMH_PER_MPS = 3.6
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def polach(axi, w, mu0, normal_N, stiff_N, kA, kS, A, B):
     """Polach 2005 law; returns (m, dm/d|xi|, dm/dw). ``stiff_N`` = axle Kalker stiffness Ca."""
     e_bw = math.exp(-B * w)
@@ -95,7 +95,7 @@ def polach(axi, w, mu0, normal_N, stiff_N, kA, kS, A, B):
     return m, m_xi, m_w
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def polach_shape(axi, mu_level, normal_N, stiff_N, kA, kS):
     """Rising part of the Polach law at a fixed friction level (no fall-off): (s, ds/d|xi|)."""
     c = math.pi * stiff_N / (4.0 * normal_N * mu_level)
@@ -110,7 +110,7 @@ def polach_shape(axi, mu_level, normal_N, stiff_N, kA, kS):
     return s, ds * c
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def polach_simple(axi, w, mu0, K, k_rozv_per_kmh):
     """Seed 000 Eq. 9; returns (m, dm/d|xi|, dm/dw). DV read in km/h (see module doc)."""
     D = 1.0 + k_rozv_per_kmh * KMH_PER_MPS * w
@@ -121,14 +121,14 @@ def polach_simple(axi, w, mu0, K, k_rozv_per_kmh):
     return m, m_xi, dm_dD * k_rozv_per_kmh * KMH_PER_MPS
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def polach_simple_shape(axi, mu_level, K):
     """Seed 000 Eq. 9 without fall-off (K_rozv = 0), normalised: (s, ds/d|xi|)."""
     E = math.exp(-K * axi / mu_level)
     return 1.0 - E, K * E / mu_level
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _saturation(alpha):
     """Seed 002 Eq. 4: Ks * alpha (normalised force) and its derivative in alpha."""
     if alpha <= 3.0:
@@ -138,7 +138,7 @@ def _saturation(alpha):
     return 1.0, 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def seed002(axi, mu_c, normal_N, stiff_N, k_red, lam):
     """Seed 002 Eqs. 4, 7, 8 (no hysteresis); returns (m, dm/d|xi|, 0)."""
     c = stiff_N / (mu_c * normal_N)  # alpha per unit creepage
@@ -151,7 +151,7 @@ def seed002(axi, mu_c, normal_N, stiff_N, k_red, lam):
     return mu_c * ka, -mu_c * lam * (1.0 - k_red) * e, 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def seed002_shape(axi, mu_level, normal_N, stiff_N):
     """Seed 002 Eq. 4 saturation alone (K_a = 1), normalised: (s, ds/d|xi|)."""
     c = stiff_N / (mu_level * normal_N)
@@ -159,7 +159,7 @@ def seed002_shape(axi, mu_level, normal_N, stiff_N):
     return f, df * c
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def creep_law(law, axi, w, mu_level, normal_N, stiff_N, p0, p1, p2, p3):
     """Dispatch to the degraded law ``mu*``. Law parameters ``p0..p3``:
 
@@ -172,7 +172,7 @@ def creep_law(law, axi, w, mu_level, normal_N, stiff_N, p0, p1, p2, p3):
     return seed002(axi, mu_level, normal_N, stiff_N, p0, p1)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def recovered_shape(law, axi, mu_level, normal_N, stiff_N, p0, p1):
     """The recovered (clean) curve's normalised rising shape ``s(|xi|)`` and its slope."""
     if law == LAW_POLACH:
@@ -182,7 +182,7 @@ def recovered_shape(law, axi, mu_level, normal_N, stiff_N, p0, p1):
     return seed002_shape(axi, mu_level, normal_N, stiff_N)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def adhesion(law, axi, w, mu_level, mu_rec, k_w, normal_N, stiff_N, p0, p1, p2, p3):
     """Degraded law blended toward the recovered curve by the filtered removal fraction ``k_w``.
 
@@ -210,7 +210,7 @@ def tustin_second_order(tau_s: float, zeta: float, dt_s: float) -> np.ndarray:
     return np.array([1.0 / a0, 2.0 / a0, 1.0 / a0, (2.0 - 2.0 * t2) / a0, (t2 - t1 + 1.0) / a0])
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def creep_curve(law, xi, w, mu_level, mu_rec, k_w, normal_N, stiff_N, p0, p1, p2, p3):
     """Vectorised evaluation for tests and plots: signed mu over arrays ``xi`` and ``w``."""
     out = np.empty_like(xi)

@@ -86,7 +86,7 @@ AS_OMEGA = 0  # rad/s
 AS_P = 1  # bar, cylinder pressure
 AS_CMD = 2  # valve command of the previous control period (for the dead time)
 AS_MU = 3  # signed adhesion coefficient used in the last substep
-AS_N = 4  # N, normal load in the last substep
+AS_N = 4  # N, normal load (quasi-static load transfer, set once per control period)
 AS_MU_LEVEL = 5  # friction level seen by the axle (contamination, R_i) in the last substep
 AS_RF_S1 = 6  # recovery filter states (transposed direct form II)
 AS_RF_S2 = 7
@@ -96,7 +96,9 @@ AS_F = 10  # N, adhesion force of the last substep (linearised, as used by both 
 AS_DOMEGA = 11  # rad/s, change of omega in the last substep
 AS_TORQUE = 12  # N m, brake torque of the last substep
 AS_CELL = 13  # index of the rail cell under the axle; AS_CONT is read once on entering it
-N_AS = 14
+AS_STIFF = 14  # N, Kalker stiffness at the current normal load (set once per control period)
+AS_VENTING = 15  # 1.0 while the valve vents (last substep)
+N_AS = 16
 
 NO_CELL = -1.0e18  # AS_CELL before the first substep
 

@@ -1,0 +1,52 @@
+"""Shared helpers: small configs built from the shipped ones."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from wsp_env.config import load_rail, load_vehicle
+from wsp_env.simulator import RunSetup, TrainSim
+
+
+def instant_brake(vehicle_id: str = "uic_z1", resistance: bool = False):
+    """A vehicle whose cylinders follow the demand instantly and whose demand is a step."""
+    veh = load_vehicle(vehicle_id)
+    brake = dataclasses.replace(
+        veh.brake,
+        fill_tau_s=0.0,
+        fill_rate_bar_per_s=1e9,
+        demand_delay_s=0.0,
+        demand_rise_s=0.0,
+        valve_dead_time_s=0.0,
+    )
+    res = (
+        veh.resistance
+        if resistance
+        else dataclasses.replace(veh.resistance, a_N=0.0, b_N_per_mps=0.0, c_N_per_mps2=0.0)
+    )
+    return dataclasses.replace(veh, brake=brake, resistance=res)
+
+
+def run_to_stop(sim: TrainSim, cmd_fn=None, max_steps: int = 40000) -> int:
+    """Step until every run stopped; ``cmd_fn(step, sim)`` gives valve commands (or None)."""
+    for n in range(max_steps):
+        sim.step(None if cmd_fn is None else cmd_fn(n, sim))
+        if sim.stopped.all():
+            return n + 1
+    raise AssertionError("runs did not stop")
+
+
+def single(vehicle, rail: str | object, speed_kmh: float = 120.0, dt_s: float = 1e-3, **setup):
+    sim = TrainSim(vehicle, n_envs=1, dt_s=dt_s)
+    rail_cfg = load_rail(rail) if isinstance(rail, str) else rail
+    sim.configure(0, RunSetup(speed_kmh, rail_cfg, **setup))
+    sim.reset()
+    return sim
+
+
+@pytest.fixture
+def rng() -> np.random.Generator:
+    return np.random.default_rng(1234)
