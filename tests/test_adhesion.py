@@ -19,7 +19,7 @@ DRY = (1.0, 0.4, 0.4, 0.6)  # Polach 2005 dry: kA, kS, A, B
 
 
 def law(name, axi, w, mu, params, stiff=CA, normal=N):
-    return A.creep_law(A.LAW_NAMES[name], axi, w, mu, normal, stiff, *params)
+    return A.creep_law(A.LAW_NAMES[name], axi, w, mu, stiff / normal, normal / stiff, *params)
 
 
 def test_polach_slope_at_zero_is_kalker_times_reduction():
@@ -108,9 +108,9 @@ def test_analytic_derivatives_match_finite_differences(name, params, mu):
 
 def test_recovery_blend_is_zero_at_zero_creep_and_mu_rec_in_sliding():
     mu, rec = 0.08, 0.10
-    m0, _, _ = A.adhesion(A.LAW_SEED002, 0.0, 0.0, mu, rec, 0.7, N, CA, 0.65, 50.0, 0, 0)
+    m0, _, _ = A.adhesion(A.LAW_SEED002, 0.0, 0.0, mu, rec, 0.7, CA / N, N / CA, 0.65, 50.0, 0, 0)
     assert m0 == 0.0
-    m, _, _ = A.adhesion(A.LAW_SEED002, 0.5, 5.0, mu, rec, 1.0, N, CA, 0.65, 50.0, 0, 0)
+    m, _, _ = A.adhesion(A.LAW_SEED002, 0.5, 5.0, mu, rec, 1.0, CA / N, N / CA, 0.65, 50.0, 0, 0)
     assert m == pytest.approx(rec, rel=1e-9)  # seed 002 Eq. 12, W > W_max
 
 

@@ -107,7 +107,10 @@ def cmd_simulate(args: argparse.Namespace) -> dict[str, Any]:
         raise UserError(f"--policy: unknown policy {args.policy!r} (available: none)")
     rail = load_rail(args.rail, args.rails_config)
     rng = np.random.default_rng(args.seed)
-    fixed: dict[str, Any] = {"demand_fraction": 1.0 if args.demand == "emergency" else 0.85}
+    fixed: dict[str, Any] = {
+        "demand_fraction": 1.0 if args.demand == "emergency" else 0.85,
+        "rail_name": args.rail,
+    }
     if args.pattern is not None:
         rail = _with_pattern(rail, args.pattern)
     setup = draw_run_setup(rail, rng, args.speed_kmh, **fixed)
@@ -174,6 +177,36 @@ def _print_simulate(result: dict[str, Any]) -> None:
         print(f"  wrote {p}")
 
 
+# ---- bench ----------------------------------------------------------------------------------
+
+
+def _add_bench(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "bench",
+        help="environment throughput (single, 1024-env vector, 256 x 32-axle) vs CartPole",
+        description="Measures steps per second of WSPBraking-v0 (single env through "
+        "gymnasium.make; native vector env) and of CartPole-v1 in the same run; medians.",
+    )
+    p.add_argument("--json", dest="json_path", default=None, help="write the result here")
+    p.add_argument("--repeats", type=int, default=5, help="timed runs per figure (5)")
+    p.add_argument("--quick", action="store_true", help="tiny counts (smoke test)")
+    p.set_defaults(func=cmd_bench)
+
+
+def cmd_bench(args: argparse.Namespace) -> dict[str, Any]:
+    from wsp_env.bench import run_bench
+
+    if args.repeats < 1:
+        raise UserError("--repeats: must be >= 1")
+    return run_bench(quick=args.quick, repeats=args.repeats)
+
+
+def _print_bench(result: dict[str, Any]) -> None:
+    from wsp_env.bench import format_bench
+
+    print(format_bench(result))
+
+
 # ---- entry point ----------------------------------------------------------------------------
 
 
@@ -183,10 +216,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", required=True)
     _add_simulate(sub)
+    _add_bench(sub)
     return parser
 
 
-PRINTERS = {"simulate": _print_simulate}
+PRINTERS = {"simulate": _print_simulate, "bench": _print_bench}
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -44,6 +44,7 @@ class RunSetup:
     gradient_permille: float = 0.0  # > 0 uphill
     axle_mu_factor: tuple[float, ...] | None = None  # R_i (seed 002 Fig. 8); None = all 1
     recovery_basis: str | None = None  # override the rail's recovery basis
+    rail_name: str = ""  # for reports: the rail condition's name in the rail table
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.speed_kmh) and self.speed_kmh > 0):
@@ -315,6 +316,13 @@ class TrainSim:
             self.axle_acc[e] = 0.0
             self.cmd[e] = 1.0
             reset_field(self.env_par, self.sections, self.env_state, self.field, e)
+            # the friction level each axle stands on (read by observers before the first step)
+            cells = np.floor(-self.axle_par[e, :, L.AP_OFFSET] / self.cell_dx_m).astype(np.int64)
+            cont = self.field[e, cells % self.field.shape[1]]
+            ep = self.env_par[e]
+            level = ep[L.EP_MU_CLEAN] - (ep[L.EP_MU_CLEAN] - ep[L.EP_MU_CONT]) * cont
+            self.axle_state[e, :, L.AS_MU_LEVEL] = level * self.axle_par[e, :, L.AP_MU_FACTOR]
+            self.axle_state[e, :, L.AS_CONT] = cont
             self.initial_energy_J[e] = self.kinetic_energy_J()[e]
 
     # ---- stepping --------------------------------------------------------------------------

@@ -73,125 +73,135 @@ REC_BASIS_NAMES = {
 KMH_PER_MPS = 3.6
 
 
-@njit(cache=True, error_model="numpy")
-def polach(axi, w, mu0, normal_N, stiff_N, kA, kS, A, B):
-    """Polach 2005 law; returns (m, dm/d|xi|, dm/dw). ``stiff_N`` = axle Kalker stiffness Ca."""
+JIT = {"cache": True, "error_model": "numpy", "inline": "always"}
+HALF_PI = 0.5 * math.pi
+TWO_OVER_PI = 2.0 / math.pi
+
+
+# The contact enters every law through ``k = Ca / N`` (creep stiffness per unit load) and its
+# inverse ``1/k``; both are computed once per control period, when the load is updated, so the
+# laws below need at most one division per call.
+
+
+@njit(**JIT)
+def _polach_bracket(eps, kA, kS):
+    """h(eps) = 2/pi [kA eps / (1 + (kA eps)^2) + arctan(kS eps)] and dh/deps."""
+    ka_eps = kA * eps
+    ks_eps = kS * eps
+    inv_den = 1.0 / (1.0 + ka_eps * ka_eps)
+    inv_ks = 1.0 / (1.0 + ks_eps * ks_eps)
+    h = TWO_OVER_PI * (ka_eps * inv_den + math.atan(ks_eps))
+    dh = TWO_OVER_PI * (kA * (1.0 - ka_eps * ka_eps) * inv_den * inv_den + kS * inv_ks)
+    return h, dh
+
+
+@njit(**JIT)
+def polach(axi, w, mu0, k, kA, kS, A, B):
+    """Polach 2005 law; returns (m, dm/d|xi|, dm/dw). ``k`` = axle Kalker stiffness / N."""
     e_bw = math.exp(-B * w)
     mu_w = mu0 * ((1.0 - A) * e_bw + A)
-    c = math.pi * stiff_N / (4.0 * normal_N * mu_w)  # eps per unit creepage
+    c = 0.25 * math.pi * k / mu_w  # eps per unit creepage
     eps = c * axi
-    ka_eps = kA * eps
-    ks_eps = kS * eps
-    den = 1.0 + ka_eps * ka_eps
-    h = (2.0 / math.pi) * (ka_eps / den + math.atan(ks_eps))
-    dh_deps = (2.0 / math.pi) * (
-        kA * (1.0 - ka_eps * ka_eps) / (den * den) + kS / (1.0 + ks_eps * ks_eps)
-    )
-    m = mu_w * h
-    m_xi = mu_w * dh_deps * c
+    h, dh = _polach_bracket(eps, kA, kS)
     dmuw_dw = -mu0 * (1.0 - A) * B * e_bw
     # m = mu_w h(c0 / mu_w)  ->  dm/dmu_w = h - eps h'(eps)
-    m_w = (h - eps * dh_deps) * dmuw_dw
-    return m, m_xi, m_w
+    return mu_w * h, mu_w * dh * c, (h - eps * dh) * dmuw_dw
 
 
-@njit(cache=True, error_model="numpy")
-def polach_shape(axi, mu_level, normal_N, stiff_N, kA, kS):
+@njit(**JIT)
+def polach_shape(axi, mu_level, k, kA, kS):
     """Rising part of the Polach law at a fixed friction level (no fall-off): (s, ds/d|xi|)."""
-    c = math.pi * stiff_N / (4.0 * normal_N * mu_level)
-    eps = c * axi
-    ka_eps = kA * eps
-    ks_eps = kS * eps
-    den = 1.0 + ka_eps * ka_eps
-    s = (2.0 / math.pi) * (ka_eps / den + math.atan(ks_eps))
-    ds = (2.0 / math.pi) * (
-        kA * (1.0 - ka_eps * ka_eps) / (den * den) + kS / (1.0 + ks_eps * ks_eps)
-    )
-    return s, ds * c
+    c = 0.25 * math.pi * k / mu_level
+    h, dh = _polach_bracket(c * axi, kA, kS)
+    return h, dh * c
 
 
-@njit(cache=True, error_model="numpy")
+@njit(**JIT)
 def polach_simple(axi, w, mu0, K, k_rozv_per_kmh):
     """Seed 000 Eq. 9; returns (m, dm/d|xi|, dm/dw). DV read in km/h (see module doc)."""
     D = 1.0 + k_rozv_per_kmh * KMH_PER_MPS * w
+    inv_D = 1.0 / D
     E = math.exp(-K * axi * D / mu0)
-    m = mu0 * (1.0 - E) / D
-    m_xi = K * E
-    dm_dD = -m / D + K * axi * E / D
-    return m, m_xi, dm_dD * k_rozv_per_kmh * KMH_PER_MPS
+    m = mu0 * (1.0 - E) * inv_D
+    dm_dD = (K * axi * E - m) * inv_D
+    return m, K * E, dm_dD * k_rozv_per_kmh * KMH_PER_MPS
 
 
-@njit(cache=True, error_model="numpy")
+@njit(**JIT)
 def polach_simple_shape(axi, mu_level, K):
     """Seed 000 Eq. 9 without fall-off (K_rozv = 0), normalised: (s, ds/d|xi|)."""
-    E = math.exp(-K * axi / mu_level)
-    return 1.0 - E, K * E / mu_level
+    g = K / mu_level
+    E = math.exp(-g * axi)
+    return 1.0 - E, g * E
 
 
-@njit(cache=True, error_model="numpy")
+@njit(**JIT)
 def _saturation(alpha):
     """Seed 002 Eq. 4: Ks * alpha (normalised force) and its derivative in alpha."""
     if alpha <= 3.0:
-        return alpha - alpha * alpha / 3.0 + alpha * alpha * alpha / 27.0, (
-            1.0 - 2.0 * alpha / 3.0 + alpha * alpha / 9.0
-        )
+        a3 = alpha * (1.0 / 3.0)
+        return alpha * (1.0 - a3 + a3 * a3 * (1.0 / 3.0)), (1.0 - a3) ** 2
     return 1.0, 0.0
 
 
-@njit(cache=True, error_model="numpy")
-def seed002(axi, mu_c, normal_N, stiff_N, k_red, lam):
+@njit(**JIT)
+def seed002(axi, mu_c, k, inv_k, k_red, lam):
     """Seed 002 Eqs. 4, 7, 8 (no hysteresis); returns (m, dm/d|xi|, 0)."""
-    c = stiff_N / (mu_c * normal_N)  # alpha per unit creepage
-    f, df = _saturation(c * axi)
-    xi_lim = 3.0 / c
+    xi_lim = 3.0 * mu_c * inv_k  # alpha = k xi / mu_c reaches 3: the peak mu_c
     if axi <= xi_lim:
+        c = k / mu_c  # alpha per unit creepage
+        f, df = _saturation(c * axi)
         return mu_c * f, mu_c * df * c, 0.0
-    e = math.exp(-lam * (axi - xi_lim))
-    ka = k_red + (1.0 - k_red) * e
-    return mu_c * ka, -mu_c * lam * (1.0 - k_red) * e, 0.0
+    x = lam * (axi - xi_lim)
+    if x > 40.0:  # e^-40 ~ 4e-18: fully on the kinematic level
+        return mu_c * k_red, 0.0, 0.0
+    e = math.exp(-x)
+    return mu_c * (k_red + (1.0 - k_red) * e), -mu_c * lam * (1.0 - k_red) * e, 0.0
 
 
-@njit(cache=True, error_model="numpy")
-def seed002_shape(axi, mu_level, normal_N, stiff_N):
+@njit(**JIT)
+def seed002_shape(axi, mu_level, k, inv_k):
     """Seed 002 Eq. 4 saturation alone (K_a = 1), normalised: (s, ds/d|xi|)."""
-    c = stiff_N / (mu_level * normal_N)
+    if axi >= 3.0 * mu_level * inv_k:
+        return 1.0, 0.0
+    c = k / mu_level
     f, df = _saturation(c * axi)
     return f, df * c
 
 
-@njit(cache=True, error_model="numpy")
-def creep_law(law, axi, w, mu_level, normal_N, stiff_N, p0, p1, p2, p3):
-    """Dispatch to the degraded law ``mu*``. Law parameters ``p0..p3``:
+@njit(**JIT)
+def creep_law(law, axi, w, mu_level, k, inv_k, p0, p1, p2, p3):
+    """Dispatch to the degraded law ``mu*``. ``k`` = Ca / N, ``inv_k`` = N / Ca. Parameters:
 
     polach: kA, kS, A, B[s/m];  polach_simple: K, K_rozv[1/(km/h)];  seed002: K_red, lambda.
     """
+    if law == LAW_SEED002:
+        return seed002(axi, mu_level, k, inv_k, p0, p1)
     if law == LAW_POLACH:
-        return polach(axi, w, mu_level, normal_N, stiff_N, p0, p1, p2, p3)
-    if law == LAW_POLACH_SIMPLE:
-        return polach_simple(axi, w, mu_level, p0, p1)
-    return seed002(axi, mu_level, normal_N, stiff_N, p0, p1)
+        return polach(axi, w, mu_level, k, p0, p1, p2, p3)
+    return polach_simple(axi, w, mu_level, p0, p1)
 
 
-@njit(cache=True, error_model="numpy")
-def recovered_shape(law, axi, mu_level, normal_N, stiff_N, p0, p1):
+@njit(**JIT)
+def recovered_shape(law, axi, mu_level, k, inv_k, p0, p1):
     """The recovered (clean) curve's normalised rising shape ``s(|xi|)`` and its slope."""
+    if law == LAW_SEED002:
+        return seed002_shape(axi, mu_level, k, inv_k)
     if law == LAW_POLACH:
-        return polach_shape(axi, mu_level, normal_N, stiff_N, p0, p1)
-    if law == LAW_POLACH_SIMPLE:
-        return polach_simple_shape(axi, mu_level, p0)
-    return seed002_shape(axi, mu_level, normal_N, stiff_N)
+        return polach_shape(axi, mu_level, k, p0, p1)
+    return polach_simple_shape(axi, mu_level, p0)
 
 
-@njit(cache=True, error_model="numpy")
-def adhesion(law, axi, w, mu_level, mu_rec, k_w, normal_N, stiff_N, p0, p1, p2, p3):
+@njit(**JIT)
+def adhesion(law, axi, w, mu_level, mu_rec, k_w, k, inv_k, p0, p1, p2, p3):
     """Degraded law blended toward the recovered curve by the filtered removal fraction ``k_w``.
 
     Returns (m, dm/d|xi|, dm/dw) — see the module docstring for the blend.
     """
-    m, m_xi, m_w = creep_law(law, axi, w, mu_level, normal_N, stiff_N, p0, p1, p2, p3)
+    m, m_xi, m_w = creep_law(law, axi, w, mu_level, k, inv_k, p0, p1, p2, p3)
     if k_w <= 0.0:
         return m, m_xi, m_w
-    s, s_xi = recovered_shape(law, axi, mu_rec, normal_N, stiff_N, p0, p1)
+    s, s_xi = recovered_shape(law, axi, mu_rec, k, inv_k, p0, p1)
     keep = 1.0 - k_w
     return keep * m + k_w * mu_rec * s, keep * m_xi + k_w * mu_rec * s_xi, keep * m_w
 
@@ -210,13 +220,12 @@ def tustin_second_order(tau_s: float, zeta: float, dt_s: float) -> np.ndarray:
     return np.array([1.0 / a0, 2.0 / a0, 1.0 / a0, (2.0 - 2.0 * t2) / a0, (t2 - t1 + 1.0) / a0])
 
 
-@njit(cache=True, error_model="numpy")
+@njit(**JIT)
 def creep_curve(law, xi, w, mu_level, mu_rec, k_w, normal_N, stiff_N, p0, p1, p2, p3):
     """Vectorised evaluation for tests and plots: signed mu over arrays ``xi`` and ``w``."""
     out = np.empty_like(xi)
+    k = stiff_N / normal_N
     for i in range(xi.size):
-        m, _, _ = adhesion(
-            law, abs(xi[i]), w[i], mu_level, mu_rec, k_w, normal_N, stiff_N, p0, p1, p2, p3
-        )
+        m, _, _ = adhesion(law, abs(xi[i]), w[i], mu_level, mu_rec, k_w, k, 1.0 / k, p0, p1, p2, p3)
         out[i] = m if xi[i] >= 0 else -m
     return out

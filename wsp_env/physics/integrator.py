@@ -66,6 +66,7 @@ from wsp_env.physics.layout import (
     AS_CONT,
     AS_DOMEGA,
     AS_F,
+    AS_INV_STIFF,
     AS_KW,
     AS_MU,
     AS_MU_LEVEL,
@@ -136,6 +137,7 @@ VENT_MARGIN_BAR = 0.005  # a valve is "venting" when its target lies this far be
 # IEEE arithmetic (no fastmath: batch and single runs must agree to the bit); error_model
 # "numpy" drops the ZeroDivisionError checks on every division (~1.7x faster here).
 KERNEL_FLAGS = {"cache": True, "error_model": "numpy"}
+INLINE_FLAGS = {"cache": True, "error_model": "numpy", "inline": "always"}
 
 
 @njit(**KERNEL_FLAGS)
@@ -236,8 +238,10 @@ def _step_env(
     for k in range(n_axles):
         n_static = axle_par[e, k, AP_N_STATIC]
         normal = max(0.05 * n_static, n_static + axle_par[e, k, AP_K_TRANSFER] * decel0)
+        stiff = axle_par[e, k, AP_STIFF] * (normal / n_static) ** (2.0 / 3.0)
         axle_state[e, k, AS_N] = normal
-        axle_state[e, k, AS_STIFF] = axle_par[e, k, AP_STIFF] * (normal / n_static) ** (2.0 / 3.0)
+        axle_state[e, k, AS_STIFF] = stiff / normal  # creep stiffness per unit load
+        axle_state[e, k, AS_INV_STIFF] = normal / stiff
     t_start = env_state[e, ES_T]
     stopped = False
     for j in range(n_sub):
@@ -286,7 +290,8 @@ def _step_env(
             )
             # --- contact: rail under the axle -----------------------------------------------
             normal = axle_state[e, k, AS_N]
-            stiff = axle_state[e, k, AS_STIFF]
+            k_n = axle_state[e, k, AS_STIFF]
+            inv_k_n = axle_state[e, k, AS_INV_STIFF]
             # an axle sees the rail as the axles ahead of it left it: read a cell once, on entry
             cell = math.floor((x - axle_par[e, k, AP_OFFSET]) * inv_dx)
             if cell != axle_state[e, k, AS_CELL]:
@@ -319,7 +324,7 @@ def _step_env(
                 axle_state[e, k, AS_KW] = kw
                 kw_eff = min(1.0, max(0.0, kw)) * cont
             m, m_xi, m_w = adhesion(
-                law, axi, w, level, mu_rec, kw_eff, normal, stiff, lp0, lp1, lp2, lp3
+                law, axi, w, level, mu_rec, kw_eff, k_n, inv_k_n, lp0, lp1, lp2, lp3
             )
             force = m * normal if dv >= 0.0 else -m * normal
             damping = r * normal * max(0.0, m_xi * inv_v_ref + m_w)
@@ -333,7 +338,7 @@ def _step_env(
                 # zero creepage (F = kappa * slip) and solve the implicit step there. Without
                 # this a wheel near standstill chatters between lock and overspeed.
                 _, s0, _ = adhesion(
-                    law, 0.0, 0.0, level, mu_rec, kw_eff, normal, stiff, lp0, lp1, lp2, lp3
+                    law, 0.0, 0.0, level, mu_rec, kw_eff, k_n, inv_k_n, lp0, lp1, lp2, lp3
                 )
                 kappa = normal * s0 * inv_v_ref
                 omega_new = (inertia * omega / dt + kappa * v_c * r - torque) / (

@@ -96,9 +96,10 @@ AS_F = 10  # N, adhesion force of the last substep (linearised, as used by both 
 AS_DOMEGA = 11  # rad/s, change of omega in the last substep
 AS_TORQUE = 12  # N m, brake torque of the last substep
 AS_CELL = 13  # index of the rail cell under the axle; AS_CONT is read once on entering it
-AS_STIFF = 14  # N, Kalker stiffness at the current normal load (set once per control period)
+AS_STIFF = 14  # Kalker stiffness / normal load at the current load (once per control period)
 AS_VENTING = 15  # 1.0 while the valve vents (last substep)
-N_AS = 16
+AS_INV_STIFF = 16  # normal load / Kalker stiffness
+N_AS = 17
 
 NO_CELL = -1.0e18  # AS_CELL before the first substep
 

@@ -1,0 +1,210 @@
+"""The Gymnasium environment: API checkers, determinism, vector = singles, reward, SB3."""
+
+from __future__ import annotations
+
+import warnings
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import wsp_env  # noqa: F401  (registers WSPBraking-v0)
+from wsp_env.env import WSPBrakingEnv, WSPBrakingVectorEnv
+
+VEHICLES = ["uic_z1", "e402b", "etr1000", "regiolis"]
+
+
+@pytest.mark.parametrize("vehicle", VEHICLES)
+@pytest.mark.parametrize("mode", ["continuous", "discrete"])
+def test_gymnasium_and_sb3_checkers_pass(vehicle, mode):
+    from stable_baselines3.common.env_checker import check_env as sb3_check_env
+
+    env = WSPBrakingEnv(vehicle=vehicle, action_mode=mode)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # any checker warning fails the test
+        check_env(env, skip_render_check=True)
+        sb3_check_env(WSPBrakingEnv(vehicle=vehicle, action_mode=mode), warn=True)
+
+
+def test_make_and_make_vec_work():
+    env = gym.make("WSPBraking-v0", vehicle="uic_z1")
+    obs, _ = env.reset(seed=0)
+    assert env.observation_space.contains(obs)
+    venv = gym.make_vec(
+        "WSPBraking-v0", num_envs=3, vectorization_mode="vector_entry_point", vehicle="regiolis"
+    )
+    obs, _ = venv.reset(seed=0)
+    assert obs.shape == (3, 4 * 16 + 2 + 16)  # regiolis: 16 axles, 16 valves
+    assert isinstance(venv.unwrapped, WSPBrakingVectorEnv)
+    assert venv.metadata["autoreset_mode"].name == "SAME_STEP"
+
+
+def _rollout(env, seed, n_steps, actions):
+    obs, _ = env.reset(seed=seed)
+    out = [obs]
+    for t in range(n_steps):
+        obs, r, term, trunc, _ = env.step(actions[t])
+        out.append(np.append(obs, r))
+        if term or trunc:
+            obs, _ = env.reset()
+            out.append(obs)
+    return out
+
+
+def test_same_seed_same_trajectory():
+    actions = np.random.default_rng(0).uniform(-1, 1, size=(300, 4)).astype(np.float32)
+    a = _rollout(WSPBrakingEnv(), 7, 300, actions)
+    b = _rollout(WSPBrakingEnv(), 7, 300, actions)
+    c = _rollout(WSPBrakingEnv(), 8, 300, actions)
+    assert all(np.array_equal(x, y) for x, y in zip(a, b, strict=True))
+    assert not np.array_equal(a[0], c[0])
+
+
+@pytest.mark.parametrize("vehicle,n", [("uic_z1", 4), ("etr1000", 3), ("uic_z1", 70)])
+def test_vector_env_equals_single_envs(vehicle, n):
+    """Seeds s..s+N-1 in the vector env give exactly the single envs' trajectories, resets
+    included (short episodes: low speed). N = 70 uses the parallel kernel."""
+    steps = 400
+    scenario = {"speed_kmh": [5.0, 15.0]}
+    venv = WSPBrakingVectorEnv(num_envs=n, vehicle=vehicle, scenario=scenario)
+    singles = [WSPBrakingEnv(vehicle=vehicle, scenario=scenario) for _ in range(n)]
+    rng = np.random.default_rng(1)
+    acts = rng.uniform(-0.5, 1, size=(steps, n, venv.core.n_valves)).astype(np.float32)
+    vobs, _ = venv.reset(seed=100)
+    sobs = [s.reset(seed=100 + i)[0] for i, s in enumerate(singles)]
+    np.testing.assert_array_equal(vobs, np.stack(sobs))
+    ended = 0
+    for t in range(steps):
+        vobs, vrew, vterm, vtrunc, vinfo = venv.step(acts[t])
+        for i, s in enumerate(singles):
+            o, r, term, trunc, info = s.step(acts[t, i])
+            assert r == vrew[i] and term == vterm[i] and trunc == vtrunc[i]
+            if term or trunc:
+                ended += 1
+                np.testing.assert_array_equal(o, vinfo["final_obs"][i])
+                assert info["metrics"] == vinfo["final_info"][i]["metrics"]
+                o, _ = s.reset()
+            np.testing.assert_array_equal(o, vobs[i])
+    assert ended >= n // 2  # autoresets were exercised (most envs ended at least once)
+
+
+def test_distance_term_sums_to_stopping_distance():
+    env = WSPBrakingEnv(reward={"distance_scale_m": 250.0})
+    env.reset(seed=3, options={"speed_kmh": 100.0, "rail": "soap"})
+    total = 0.0
+    while True:
+        _, _, term, trunc, info = env.step(np.full(4, 0.6, dtype=np.float32))
+        total += info["reward_terms"]["distance"]
+        if term or trunc:
+            break
+    assert term
+    d = info["metrics"]["stopping_distance_m"]
+    assert -total * 250.0 == pytest.approx(d, rel=1e-9)
+    assert info["metrics"]["episode_reward_terms"]["distance"] == pytest.approx(total, rel=1e-12)
+
+
+def test_reward_penalises_sliding_without_wsp():
+    """Full demand on soap locks wheels: slide, lock and energy terms are clearly negative."""
+    env = WSPBrakingEnv()
+    env.reset(seed=0, options={"speed_kmh": 120.0, "rail": "soap", "mu_contaminated": 0.07})
+    while True:
+        _, _, term, trunc, info = env.step(np.ones(4, dtype=np.float32))
+        if term or trunc:
+            break
+    terms = info["metrics"]["episode_reward_terms"]
+    assert terms["lock"] < -1 and terms["slide"] < 0 and terms["energy"] < 0
+    assert terms["air"] == 0.0  # no valve ever vented
+
+
+def test_options_fix_every_drawn_parameter():
+    env = WSPBrakingEnv()
+    opts = {
+        "speed_kmh": 90.0,
+        "rail": "oil",
+        "mu_contaminated": 0.05,
+        "pattern": "uniform",
+        "load_factor": 1.1,
+        "pad_factor": 0.95,
+        "gradient_permille": 3.0,
+        "demand": "service",
+    }
+    _, info = env.reset(seed=1, options=opts)
+    _, info2 = env.reset(seed=2, options=opts)
+    assert info["scenario"] == info2["scenario"]
+    s = info["scenario"]
+    assert s["speed_kmh"] == 90.0 and s["rail"] == "oil" and s["mu_contaminated"] == 0.05
+    assert s["demand_fraction"] == 0.85 and s["gradient_permille"] == 3.0
+    with pytest.raises(ValueError, match=r"options\.colour"):
+        env.reset(options={"colour": "red"})
+
+
+def test_bad_actions():
+    env = WSPBrakingEnv()
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="NaN"):
+        env.step(np.array([0.0, np.nan, 0.0, 0.0], dtype=np.float32))
+    with pytest.raises(ValueError, match="shape"):
+        env.step(np.zeros(3, dtype=np.float32))
+    _, _, _, _, info = env.step(np.array([3.0, -2.0, 0.5, 0.5], dtype=np.float32))
+    assert info["action_clipped"] == 2
+    denv = WSPBrakingEnv(action_mode="discrete")
+    denv.reset(seed=0)
+    with pytest.raises(ValueError, match="vent"):
+        denv.step(np.array([0, 1, 2, 3]))
+
+
+def test_discrete_hold_vent_fill():
+    env = WSPBrakingEnv(action_mode="discrete")
+    env.reset(seed=0, options={"speed_kmh": 100.0, "rail": "wet"})
+    for _ in range(150):
+        env.step(np.array([2, 2, 2, 2]))
+    p = env.core.sim.pressure_bar[0].copy()
+    env.step(np.array([1, 0, 2, 1]))  # the fill command still acts for the valve dead time
+    p1 = env.core.sim.pressure_bar[0].copy()
+    assert p1[0] >= p[0]
+    for _ in range(10):
+        env.step(np.array([1, 0, 2, 1]))
+    p, p2 = p1, env.core.sim.pressure_bar[0]
+    assert p2[0] == pytest.approx(p[0], abs=1e-9) and p2[3] == pytest.approx(p[3], abs=1e-9)
+    assert p2[1] < 0.5 * p[1]
+    assert p2[2] >= p[2] - 1e-9
+
+
+def test_bogie_valves_and_privileged_observation():
+    env = WSPBrakingEnv(vehicle="etr1000", valve_group="bogie", privileged=True)
+    assert env.action_space.shape == (16,)
+    obs, _ = env.reset(seed=0, options={"rail": "soap", "speed_kmh": 200.0})
+    n = 32
+    base = 4 * n + 2 + 16
+    assert obs.shape == (base + 1 + 2 * n,)
+    assert obs[base] == pytest.approx(200 / 360, rel=1e-6)  # true speed / max speed
+    assert 0.0 < obs[base + 1] < 0.3  # friction level of axle 1
+
+
+def test_render_rgb_array():
+    env = WSPBrakingEnv(render_mode="rgb_array")
+    env.reset(seed=0)
+    env.step(np.zeros(4, dtype=np.float32))
+    img = env.render()
+    assert img.ndim == 3 and img.shape[2] == 3 and img.dtype == np.uint8
+    assert img.std() > 10  # not a blank image
+
+
+def test_sb3_ppo_trains_on_the_batched_env():
+    """A few thousand PPO steps through the native vector env adapter."""
+    import torch
+    from stable_baselines3 import PPO
+    from wsp_env.agents.sb3_vec import SB3VecEnv
+
+    torch.set_num_threads(1)
+    venv = SB3VecEnv(num_envs=8, scenario={"speed_kmh": [20.0, 40.0]})
+    model = PPO("MlpPolicy", venv, n_steps=256, batch_size=512, n_epochs=2, seed=0, device="cpu")
+    before = [p.detach().clone() for p in model.policy.parameters()]
+    model.learn(total_timesteps=4096)
+    assert model.num_timesteps >= 4096
+    after = list(model.policy.parameters())
+    assert any(not torch.equal(a, b) for a, b in zip(after, before, strict=True))
+    obs = venv.reset()
+    action, _ = model.predict(obs, deterministic=True)
+    assert action.shape == (8, 4) and np.isfinite(action).all()

@@ -1,0 +1,468 @@
+"""``WSPBraking-v0``: wheel slide protection as a Gymnasium environment (single and native vector).
+
+A train brakes from ``speed_kmh`` to standstill on a rail drawn at ``reset`` (contaminant,
+adhesion level and pattern, load, pad friction, gradient, demand). Every control period
+(20 ms, the BCU cycle) the agent sets each WSP valve; the physics runs 1 ms substeps inside.
+
+**Action** — ``action_mode="continuous"`` (default): ``Box(-1, 1, (n_valves,), float32)``; valve
+``j`` asks for the fraction ``(a_j + 1) / 2`` of the current demand pressure (the pneumatics
+decide how fast the cylinder gets there; nothing can exceed the demand). Out-of-range values are
+clipped and counted in ``info["action_clipped"]``; a NaN raises ``ValueError``.
+``action_mode="discrete"``: ``MultiDiscrete([3] * n_valves)`` with 0 = vent, 1 = hold,
+2 = fill (apply), like real dump/hold valves. Valves are per axle, or per bogie with
+``valve_group="bogie"``.
+
+**Observation** — ``Box(-5, 5, float32)``, what a WSP measures, normalised (``v_s`` = vehicle
+maximum speed): per axle the wheel speed ``/ v_s``, the wheel deceleration ``/ 10 m/s^2``, the
+slip against the reference speed ``(v_ref - v_i) / max(v_ref, 1 m/s)``, the cylinder pressure
+``/ p_max``; then the demand ``/ p_max``, the reference speed ``/ v_s`` (fastest wheel, falling
+at most 1.5 m/s^2), and the previous action. ``privileged=True`` appends the true train speed,
+each axle's friction level and true creepage.
+
+**Reward** — the sum of terms, each in ``info["reward_terms"]`` (weights in ``reward``):
+
+* ``distance``  ``-dx / distance_scale_m``: over an episode it sums to
+  ``-stopping_distance / distance_scale_m``;
+* ``slide``     ``-w_slide * sum_i max(0, V - v_i - tol) dt / slide_scale_m`` with
+  ``tol = max(slide_tol_kmh, slide_tol_rel * V)``: sliding beyond the tolerated band;
+* ``lock``      ``-w_lock * (locked axles) dt``;
+* ``energy``    ``-w_energy * wheel-rail sliding energy / energy_scale_J`` (wheel/rail damage);
+* ``air``       ``-w_air * vented free-air litres / air_scale_l``.
+
+**Episodes** — ``terminated`` at standstill, ``truncated`` when ``max_time_s`` of braking has
+passed. ``info["metrics"]`` at the end carries the run's metrics (``metrics.run_metrics``).
+``reset(options=...)`` fixes any drawn parameter (``speed_kmh``, ``rail``, ``mu_contaminated``,
+``pattern``, ``load_factor``, ``pad_factor``, ``gradient_permille``, ``demand``, ``sections``,
+``axle_mu_factor``, ``recovery_basis``).
+
+The vector class steps all environments in one compiled call and autoresets in the same step
+(``AutoresetMode.SAME_STEP``): an ended environment's last observation and info are in
+``info["final_obs"]`` / ``info["final_info"]`` (masks ``_final_obs`` / ``_final_info``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+from gymnasium.utils import seeding
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+
+from wsp_env import env_kernel as K
+from wsp_env.config import (
+    ConfigError,
+    RailConfig,
+    VehicleConfig,
+    from_dict,
+    load_rails,
+    load_vehicle,
+)
+from wsp_env.metrics import run_metrics
+from wsp_env.physics.layout import EP_P_MAX
+from wsp_env.simulator import RunSetup, TrainSim, draw_run_setup
+
+PARALLEL_MIN_ENVS = 64
+
+
+@dataclass(frozen=True)
+class RewardConfig:
+    """Weights and scales of the reward terms (see the module docstring)."""
+
+    distance_scale_m: float = field(default=1000.0, metadata={"gt": 0.0})
+    w_slide: float = field(default=1e-3, metadata={"ge": 0.0})
+    slide_tol_kmh: float = field(default=3.0, metadata={"ge": 0.0})
+    slide_tol_rel: float = field(default=0.15, metadata={"ge": 0.0})
+    slide_scale_m: float = field(default=1.0, metadata={"gt": 0.0})
+    w_lock: float = field(default=0.1, metadata={"ge": 0.0})
+    lock_speed_kmh: float = field(default=0.5, metadata={"ge": 0.0})
+    w_energy: float = field(default=0.1, metadata={"ge": 0.0})
+    energy_scale_J: float = field(default=1e6, metadata={"gt": 0.0})
+    w_air: float = field(default=0.01, metadata={"ge": 0.0})
+    air_scale_l: float = field(default=1.0, metadata={"gt": 0.0})
+
+    def vector(self) -> np.ndarray:
+        v = np.zeros(K.N_RP)
+        v[K.RP_DISTANCE_SCALE] = self.distance_scale_m
+        v[K.RP_W_SLIDE] = self.w_slide
+        v[K.RP_SLIDE_TOL_KMH] = self.slide_tol_kmh
+        v[K.RP_SLIDE_TOL_REL] = self.slide_tol_rel
+        v[K.RP_SLIDE_SCALE] = self.slide_scale_m
+        v[K.RP_W_LOCK] = self.w_lock
+        v[K.RP_W_ENERGY] = self.w_energy
+        v[K.RP_ENERGY_SCALE] = self.energy_scale_J
+        v[K.RP_W_AIR] = self.w_air
+        v[K.RP_AIR_SCALE] = self.air_scale_l
+        v[K.RP_LOCK_SPEED] = self.lock_speed_kmh / 3.6
+        return v
+
+
+TERM_NAMES = ("distance", "slide", "lock", "energy", "air")
+
+
+@dataclass(frozen=True)
+class ScenarioConfig:
+    """The distribution ``reset`` draws from. Ranges are ``[low, high]`` (uniform)."""
+
+    speed_kmh: tuple[float, ...] | None = field(default=None, metadata={"len": 2, "gt": 0.0})
+    rails: dict[str, float] = field(
+        default_factory=lambda: {"soap": 0.5, "leaves": 0.2, "oil": 0.15, "wet": 0.15}
+    )
+    load_factor: tuple[float, ...] = field(default=(0.85, 1.15), metadata={"len": 2, "gt": 0.0})
+    pad_factor: tuple[float, ...] = field(default=(0.9, 1.1), metadata={"len": 2, "gt": 0.0})
+    gradient_permille: tuple[float, ...] = field(default=(-5.0, 5.0), metadata={"len": 2})
+    emergency_probability: float = field(default=0.7, metadata={"ge": 0.0, "le": 1.0})
+    service_demand_fraction: float = field(default=0.85, metadata={"gt": 0.0, "le": 1.0})
+
+    def validate(self, where: str) -> None:
+        prefix = f"{where}." if where else ""
+        for name in ("speed_kmh", "load_factor", "pad_factor", "gradient_permille"):
+            rng = getattr(self, name)
+            if rng is not None and rng[0] > rng[1]:
+                raise ConfigError(f"{prefix}{name}: low end exceeds high end")
+        if not self.rails or min(self.rails.values()) < 0 or sum(self.rails.values()) <= 0:
+            raise ConfigError(f"{prefix}rails: needs non-negative weights, not all zero")
+
+
+OPTION_KEYS = (
+    "speed_kmh", "rail", "mu_contaminated", "pattern", "load_factor", "pad_factor",
+    "gradient_permille", "demand", "sections", "axle_mu_factor", "recovery_basis",
+    "background",
+)  # fmt: skip
+
+
+def _config(cls: type, value: Any, name: str) -> Any:
+    if value is None:
+        return cls()
+    if isinstance(value, cls):
+        return value
+    return from_dict(cls, value, name)
+
+
+class _BrakingCore:
+    """State and stepping shared by the single and the vector environment."""
+
+    def __init__(
+        self,
+        n_envs: int,
+        vehicle: str | VehicleConfig = "uic_z1",
+        action_mode: str = "continuous",
+        valve_group: str | None = None,
+        privileged: bool = False,
+        reward: RewardConfig | dict | None = None,
+        scenario: ScenarioConfig | dict | None = None,
+        rails_config: str | None = None,
+        control_period_s: float = 0.02,
+        substep_s: float = 1e-3,
+        max_time_s: float = 300.0,
+    ) -> None:
+        veh = vehicle if isinstance(vehicle, VehicleConfig) else load_vehicle(vehicle)
+        if valve_group is not None:
+            if valve_group not in ("axle", "bogie"):
+                raise ValueError(f"valve_group: {valve_group!r} is not 'axle' or 'bogie'")
+            veh = dataclasses.replace(
+                veh, brake=dataclasses.replace(veh.brake, valve_group=valve_group)
+            )
+        if action_mode not in ("continuous", "discrete"):
+            raise ValueError(f"action_mode: {action_mode!r} is not 'continuous' or 'discrete'")
+        self.vehicle = veh
+        self.reward = _config(RewardConfig, reward, "reward")
+        self.scenario = _config(ScenarioConfig, scenario, "scenario")
+        self.rails: dict[str, RailConfig] = load_rails(rails_config)
+        for name in self.scenario.rails:
+            if name not in self.rails:
+                raise ConfigError(
+                    f"scenario.rails.{name}: unknown rail (known: {', '.join(self.rails)})"
+                )
+        self.sim = TrainSim(veh, n_envs=n_envs, dt_s=substep_s, control_period_s=control_period_s)
+        self.n_envs = n_envs
+        self.n_axles = self.sim.n_axles
+        self.valve_of_axle = self.sim.arrays.valve_of_axle
+        self.n_valves = int(self.valve_of_axle.max()) + 1
+        self.mode = K.MODE_CONTINUOUS if action_mode == "continuous" else K.MODE_DISCRETE
+        self.action_mode = action_mode
+        self.privileged = privileged
+        self.obs_dim = K.obs_size(self.n_axles, self.n_valves, privileged)
+        self.obs = np.zeros((n_envs, self.obs_dim), dtype=np.float32)
+        self.terms = np.zeros((n_envs, K.N_TERMS))
+        self.flags = np.zeros((n_envs, K.N_F), dtype=np.int64)
+        self.wsp = np.zeros((n_envs, K.N_W))
+        self.prev_wheel = np.zeros((n_envs, self.n_axles))
+        self.prev_action = np.ones((n_envs, self.n_valves))
+        self.obs_par = np.zeros(K.N_OP)
+        self.obs_par[K.OP_SPEED_SCALE] = veh.max_speed_kmh / 3.6
+        self.obs_par[K.OP_DECEL_SCALE] = 10.0
+        self.obs_par[K.OP_REF_DECEL_LIMIT] = 1.5
+        self.obs_par[K.OP_REF_RISE_LIMIT] = 0.5
+        self.obs_par[K.OP_MAX_TIME] = max_time_s
+        self.obs_par[K.OP_PRIVILEGED] = 1.0 if privileged else 0.0
+        self.reward_par = self.reward.vector()
+        self.rngs: list[np.random.Generator] = [np.random.default_rng() for _ in range(n_envs)]
+        self.episode_return = np.zeros(n_envs)
+        self.episode_terms = np.zeros((n_envs, K.N_TERMS))
+        self._step_fn = K.env_step_parallel if n_envs >= PARALLEL_MIN_ENVS else K.env_step_serial
+
+    # ---- spaces ----------------------------------------------------------------------------
+
+    def action_space(self) -> spaces.Space:
+        if self.mode == K.MODE_CONTINUOUS:
+            return spaces.Box(-1.0, 1.0, (self.n_valves,), dtype=np.float32)
+        return spaces.MultiDiscrete([3] * self.n_valves)
+
+    def observation_space(self) -> spaces.Box:
+        return spaces.Box(-K.OBS_CLIP, K.OBS_CLIP, (self.obs_dim,), dtype=np.float32)
+
+    # ---- scenario draws --------------------------------------------------------------------
+
+    def draw_setup(self, rng: np.random.Generator, options: dict[str, Any] | None) -> RunSetup:
+        opts = dict(options or {})
+        unknown = sorted(set(opts) - set(OPTION_KEYS))
+        if unknown:
+            raise ValueError(f"options.{unknown[0]}: unknown (allowed: {', '.join(OPTION_KEYS)})")
+        sc = self.scenario
+        names = list(sc.rails)
+        weights = np.array([sc.rails[n] for n in names], dtype=float)
+        rail_name = names[int(rng.choice(len(names), p=weights / weights.sum()))]
+        lo, hi = sc.speed_kmh or (40.0, self.vehicle.max_speed_kmh)
+        speed = float(rng.uniform(lo, hi))
+        load = float(rng.uniform(*sc.load_factor))
+        pad = float(rng.uniform(*sc.pad_factor))
+        grade = float(rng.uniform(*sc.gradient_permille))
+        emergency = bool(rng.uniform() < sc.emergency_probability)
+        rail_name = str(opts.pop("rail", rail_name))
+        if rail_name not in self.rails:
+            raise ValueError(
+                f"options.rail: unknown rail {rail_name!r} (known: {', '.join(self.rails)})"
+            )
+        rail = self.rails[rail_name]
+        pattern = opts.pop("pattern", None)
+        if pattern is not None:
+            rail = dataclasses.replace(rail, patterns={str(pattern): 1.0})
+        demand = opts.pop("demand", "emergency" if emergency else "service")
+        if demand not in ("emergency", "service"):
+            raise ValueError(f"options.demand: {demand!r} is not 'emergency' or 'service'")
+        speed = float(opts.pop("speed_kmh", speed))
+        fixed: dict[str, Any] = {
+            "load_factor": load,
+            "pad_factor": pad,
+            "gradient_permille": grade,
+            "demand_fraction": 1.0 if demand == "emergency" else sc.service_demand_fraction,
+        }
+        fixed.update(opts)
+        if "sections" in fixed:
+            fixed["sections"] = tuple(tuple(float(v) for v in s) for s in fixed["sections"])
+        if "axle_mu_factor" in fixed and fixed["axle_mu_factor"] is not None:
+            fixed["axle_mu_factor"] = tuple(float(v) for v in fixed["axle_mu_factor"])
+        fixed["rail_name"] = rail_name
+        return draw_run_setup(rail, rng, speed, **fixed)
+
+    def reset_env(self, e: int, options: dict[str, Any] | None) -> dict[str, Any]:
+        setup = self.draw_setup(self.rngs[e], options)
+        sim = self.sim
+        sim.configure(e, setup)
+        sim.reset([e])
+        sim.cmd[e] = 1.0
+        K.reset_obs(
+            e, sim.env_par, sim.axle_par, sim.env_state, sim.axle_state, self.wsp,
+            self.prev_wheel, self.prev_action, self.obs_par, sim.control_period_s, self.obs,
+        )  # fmt: skip
+        self.episode_return[e] = 0.0
+        self.episode_terms[e] = 0.0
+        return {"scenario": self.describe(e)}
+
+    def describe(self, e: int) -> dict[str, Any]:
+        s = self.sim.setups[e]
+        assert s is not None
+        return {
+            "vehicle": self.vehicle.id,
+            "speed_kmh": s.speed_kmh,
+            "rail": s.rail_name,
+            "mu_contaminated": s.mu_contaminated,
+            "sections": [list(x) for x in s.sections],
+            "background": s.background,
+            "load_factor": s.load_factor,
+            "pad_factor": s.pad_factor,
+            "gradient_permille": s.gradient_permille,
+            "demand_fraction": s.demand_fraction,
+        }
+
+    # ---- stepping --------------------------------------------------------------------------
+
+    def check_actions(self, actions: np.ndarray) -> np.ndarray:
+        a = np.asarray(actions)
+        if a.shape != (self.n_envs, self.n_valves):
+            want = (self.n_valves,) if self.n_envs == 1 else (self.n_envs, self.n_valves)
+            raise ValueError(f"action: expected shape {want}, got {np.shape(actions)}")
+        if self.mode == K.MODE_CONTINUOUS:
+            if a.dtype.kind not in "fiu":
+                raise ValueError(f"action: expected numbers, got dtype {a.dtype}")
+            if np.isnan(a).any():
+                raise ValueError("action: NaN in a valve command (expected values in [-1, 1])")
+            return a if a.dtype in (np.float32, np.float64) else a.astype(np.float64)
+        a = a.astype(np.float64)
+        if not np.isin(a, (0.0, 1.0, 2.0)).all():
+            raise ValueError("action: discrete valve modes must be 0 (vent), 1 (hold) or 2 (fill)")
+        return a
+
+    def step(self, actions: np.ndarray) -> None:
+        sim = self.sim
+        self._step_fn(
+            self.mode, actions, self.valve_of_axle, sim.n_sub, sim.dt_s, sim.control_period_s,
+            sim.cmd, sim.env_par, sim.axle_par, sim.sections, sim.env_state, sim.axle_state,
+            sim.field, sim.env_acc, sim.axle_acc, self.wsp, self.prev_wheel, self.prev_action,
+            self.obs_par, self.reward_par, self.obs, self.terms, self.flags,
+        )  # fmt: skip
+
+    def episode_info(self, e: int) -> dict[str, Any]:
+        metrics = run_metrics(self.sim, e)
+        metrics["episode_return"] = float(self.episode_return[e])
+        metrics["episode_reward_terms"] = dict(
+            zip(TERM_NAMES, (float(x) for x in self.episode_terms[e]), strict=True)
+        )
+        return metrics
+
+    def render(self, e: int = 0) -> np.ndarray:
+        from wsp_env.plotting import render_state
+
+        sim = self.sim
+        return render_state(
+            wheel_kmh=3.6 * sim.wheel_speed_mps[e],
+            train_kmh=3.6 * sim.speed_mps[e],
+            ref_kmh=3.6 * self.wsp[e, K.W_VREF],
+            pressure_bar=sim.pressure_bar[e],
+            demand_bar=float(sim.demand_bar()[e]),
+            p_max_bar=float(sim.env_par[e, EP_P_MAX]),
+            time_s=float(sim.time_s[e]),
+            distance_m=float(sim.position_m[e]),
+            v_max_kmh=self.vehicle.max_speed_kmh,
+        )
+
+
+class WSPBrakingEnv(gym.Env):
+    __doc__ = __doc__
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 50}
+
+    def __init__(self, render_mode: str | None = None, **kwargs: Any) -> None:
+        if render_mode not in (None, "rgb_array"):
+            raise ValueError(f"render_mode: {render_mode!r} (supported: rgb_array)")
+        self.render_mode = render_mode
+        self.core = _BrakingCore(1, **kwargs)
+        self.action_space = self.core.action_space()
+        self.observation_space = self.core.observation_space()
+        self._reward_terms = np.zeros(K.N_TERMS)
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        super().reset(seed=seed)
+        self.core.rngs[0] = self.np_random
+        info = self.core.reset_env(0, options)
+        return self.core.obs[0].copy(), info
+
+    def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        core = self.core
+        a = core.check_actions(np.reshape(action, (1, -1)) if np.ndim(action) == 1 else action)
+        core.step(a)
+        terms = core.terms[0]
+        reward = float(terms.sum())
+        core.episode_return[0] += reward
+        core.episode_terms[0] += terms
+        terminated = bool(core.flags[0, K.F_TERMINATED])
+        truncated = bool(core.flags[0, K.F_TRUNCATED])
+        info: dict[str, Any] = {
+            "reward_terms": dict(zip(TERM_NAMES, terms.tolist(), strict=True)),
+            "action_clipped": int(core.flags[0, K.F_CLIPPED]),
+        }
+        if terminated or truncated:
+            info["metrics"] = core.episode_info(0)
+        return core.obs[0].copy(), reward, terminated, truncated, info
+
+    def render(self) -> np.ndarray | None:
+        if self.render_mode != "rgb_array":
+            return None
+        return self.core.render(0)
+
+
+class WSPBrakingVectorEnv(VectorEnv):
+    """``num_envs`` environments stepped by one compiled call; same-step autoreset."""
+
+    metadata: ClassVar[dict[str, Any]] = {
+        "render_modes": ["rgb_array"],
+        "render_fps": 50,
+        "autoreset_mode": AutoresetMode.SAME_STEP,
+    }
+
+    def __init__(
+        self,
+        num_envs: int = 1,
+        max_episode_steps: int | None = None,
+        render_mode: str | None = None,
+        **kwargs: Any,
+    ) -> None:
+        if max_episode_steps is not None:  # gymnasium passes the spec's value; ours is time-based
+            kwargs.setdefault(
+                "max_time_s", max_episode_steps * kwargs.get("control_period_s", 0.02)
+            )
+        self.core = _BrakingCore(num_envs, **kwargs)
+        self.num_envs = num_envs
+        self.render_mode = render_mode
+        self.single_action_space = self.core.action_space()
+        self.single_observation_space = self.core.observation_space()
+        self.action_space = batch_space(self.single_action_space, num_envs)
+        self.observation_space = batch_space(self.single_observation_space, num_envs)
+        self._ended = np.zeros(num_envs, dtype=bool)
+
+    def reset(
+        self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        if isinstance(seed, int):
+            seeds: list[int | None] = [seed + i for i in range(self.num_envs)]
+        elif seed is None:
+            seeds = [None] * self.num_envs
+        else:
+            if len(seed) != self.num_envs:
+                raise ValueError(f"seed: {len(seed)} seeds for {self.num_envs} environments")
+            seeds = list(seed)
+        for i, s in enumerate(seeds):
+            self.core.rngs[i] = seeding.np_random(s)[0]
+        scenarios = [self.core.reset_env(i, options)["scenario"] for i in range(self.num_envs)]
+        return self.core.obs.copy(), {"scenario": np.array(scenarios, dtype=object)}
+
+    def step(
+        self, actions: Any
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        core = self.core
+        a = core.check_actions(actions)
+        core.step(a)
+        rewards = core.terms.sum(axis=1)
+        core.episode_return += rewards
+        core.episode_terms += core.terms
+        terminated = core.flags[:, K.F_TERMINATED].astype(bool)
+        truncated = core.flags[:, K.F_TRUNCATED].astype(bool)
+        info: dict[str, Any] = {
+            "reward_terms": {n: core.terms[:, i].copy() for i, n in enumerate(TERM_NAMES)},
+            "action_clipped": core.flags[:, K.F_CLIPPED].copy(),
+        }
+        ended = np.flatnonzero(terminated | truncated)
+        if ended.size:
+            final_obs = np.zeros_like(core.obs)
+            final_info = np.full(self.num_envs, None, dtype=object)
+            mask = np.zeros(self.num_envs, dtype=bool)
+            mask[ended] = True
+            for e in ended:  # only the environments that just ended
+                final_obs[e] = core.obs[e]
+                final_info[e] = {"metrics": core.episode_info(e)}
+                core.reset_env(int(e), None)
+            info.update(
+                final_obs=final_obs, _final_obs=mask, final_info=final_info, _final_info=mask.copy()
+            )
+        return core.obs.copy(), rewards, terminated, truncated, info
+
+    def render(self) -> tuple[np.ndarray, ...] | None:
+        if self.render_mode != "rgb_array":
+            return None
+        return tuple(self.core.render(e) for e in range(self.num_envs))

@@ -1,0 +1,392 @@
+"""The environment's compiled step: actions -> valves -> physics -> WSP reference speed ->
+observation and reward terms, for every environment in one call (no Python per env).
+
+Kept apart from ``env.py`` (the Gymnasium classes) so the hot path is one numba function.
+"""
+
+from __future__ import annotations
+
+import math
+
+from numba import njit, prange
+
+from wsp_env.physics.integrator import INLINE_FLAGS, KERNEL_FLAGS, _step_env
+from wsp_env.physics.layout import (
+    AA_AIR_L,
+    AA_SLIDE_E,
+    AP_RADIUS,
+    AS_CMD,
+    AS_MU_LEVEL,
+    AS_OMEGA,
+    AS_P,
+    CMD_HOLD,
+    EP_DEMAND_DELAY,
+    EP_DEMAND_RISE,
+    EP_P_MAX,
+    ES_STOPPED,
+    ES_T,
+    ES_V,
+    ES_X,
+)
+
+# reward terms (columns of ``terms``); the reward is their sum
+R_DISTANCE = 0  # -dx / distance_scale: sums to -stopping_distance / distance_scale
+R_SLIDE = 1  # -w_slide * sum_i max(0, dv_i - tolerance) * dt / slide_scale
+R_LOCK = 2  # -w_lock * (number of locked axles) * dt
+R_ENERGY = 3  # -w_energy * wheel-rail sliding energy / energy_scale
+R_AIR = 4  # -w_air * vented free-air litres / air_scale
+N_TERMS = 5
+
+# reward parameters (``reward_par``)
+RP_DISTANCE_SCALE = 0  # m
+RP_W_SLIDE = 1
+RP_SLIDE_TOL_KMH = 2  # absolute tolerated sliding, km/h
+RP_SLIDE_TOL_REL = 3  # relative tolerated sliding (of the reference speed)
+RP_SLIDE_SCALE = 4  # m of excess sliding
+RP_W_LOCK = 5
+RP_W_ENERGY = 6
+RP_ENERGY_SCALE = 7  # J
+RP_W_AIR = 8
+RP_AIR_SCALE = 9  # litres
+RP_LOCK_SPEED = 10  # m/s: wheel slower than this (train faster than 1 m/s) = locked
+N_RP = 11
+
+# observation parameters (``obs_par``)
+OP_SPEED_SCALE = 0  # m/s
+OP_DECEL_SCALE = 1  # m/s^2
+OP_REF_DECEL_LIMIT = 2  # m/s^2: the reference speed may fall at most this fast
+OP_REF_RISE_LIMIT = 3  # m/s^2: ... and rise at most this fast
+OP_MAX_TIME = 4  # s: truncation
+OP_PRIVILEGED = 5  # 1.0: append true speed, friction level and true creepage
+N_OP = 6
+
+# per-env WSP-side state (``wsp``)
+W_VREF = 0  # m/s, reference speed estimate
+N_W = 1
+
+OBS_CLIP = 5.0
+MODE_CONTINUOUS = 0
+MODE_DISCRETE = 1
+
+# flags (``flags``): terminated, truncated, number of clipped action components, bad action
+F_TERMINATED = 0
+F_TRUNCATED = 1
+F_CLIPPED = 2
+F_NAN = 3
+N_F = 4
+
+
+def obs_size(n_axles: int, n_valves: int, privileged: bool) -> int:
+    """Length of one observation (see ``write_obs``)."""
+    return 4 * n_axles + 2 + n_valves + ((1 + 2 * n_axles) if privileged else 0)
+
+
+@njit(**INLINE_FLAGS)
+def demand_bar(env_par, env_state, e):
+    rise = env_par[e, EP_DEMAND_RISE]
+    t = env_state[e, ES_T] - env_par[e, EP_DEMAND_DELAY]
+    if rise > 0.0:
+        frac = min(1.0, max(0.0, t / rise))
+    else:
+        frac = 1.0 if t >= 0.0 else 0.0
+    return env_par[e, EP_P_MAX] * frac
+
+
+@njit(**INLINE_FLAGS)
+def _clip(x):
+    return min(OBS_CLIP, max(-OBS_CLIP, x))
+
+
+@njit(**KERNEL_FLAGS)
+def write_obs(
+    e, env_par, axle_par, env_state, axle_state, wsp, prev_wheel, prev_action, obs_par, ctrl_dt, obs
+):
+    """Observation of env ``e``: what a WSP measures, normalised to about [-1, 1].
+
+    ``[v_axle_i / v_s]``, ``[axle deceleration_i / a_s]``, ``[(v_ref - v_axle_i) / max(v_ref, 1)]``,
+    ``[p_i / p_max]``, ``p_demand / p_max``, ``v_ref / v_s``, ``[previous action]``, and with
+    ``privileged``: ``V / v_s``, ``[friction level_i]``, ``[(V - v_axle_i) / max(V, 1)]``.
+    """
+    n_axles = axle_par.shape[1]
+    n_valves = prev_action.shape[1]
+    v_s = obs_par[OP_SPEED_SCALE]
+    a_s = obs_par[OP_DECEL_SCALE]
+    p_max = env_par[e, EP_P_MAX]
+    v_ref = wsp[e, W_VREF]
+    inv_ref = 1.0 / max(v_ref, 1.0)
+    for k in range(n_axles):
+        wheel = axle_state[e, k, AS_OMEGA] * axle_par[e, k, AP_RADIUS]
+        obs[e, k] = wheel / v_s
+        obs[e, n_axles + k] = _clip((prev_wheel[e, k] - wheel) / ctrl_dt / a_s)
+        obs[e, 2 * n_axles + k] = _clip((v_ref - wheel) * inv_ref)
+        obs[e, 3 * n_axles + k] = axle_state[e, k, AS_P] / p_max
+    base = 4 * n_axles
+    obs[e, base] = demand_bar(env_par, env_state, e) / p_max
+    obs[e, base + 1] = v_ref / v_s
+    for j in range(n_valves):
+        obs[e, base + 2 + j] = prev_action[e, j]
+    if obs_par[OP_PRIVILEGED] > 0.0:
+        base = base + 2 + n_valves
+        v = env_state[e, ES_V]
+        obs[e, base] = v / v_s
+        inv_v = 1.0 / max(v, 1.0)
+        for k in range(n_axles):
+            wheel = axle_state[e, k, AS_OMEGA] * axle_par[e, k, AP_RADIUS]
+            obs[e, base + 1 + k] = axle_state[e, k, AS_MU_LEVEL]
+            obs[e, base + 1 + n_axles + k] = _clip((v - wheel) * inv_v)
+
+
+@njit(**KERNEL_FLAGS)
+def reset_obs(
+    e, env_par, axle_par, env_state, axle_state, wsp, prev_wheel, prev_action, obs_par, ctrl_dt, obs
+):
+    """Reset the WSP-side state of env ``e`` after ``TrainSim.reset`` and write its observation."""
+    wsp[e, W_VREF] = env_state[e, ES_V]
+    for k in range(axle_par.shape[1]):
+        prev_wheel[e, k] = axle_state[e, k, AS_OMEGA] * axle_par[e, k, AP_RADIUS]
+    for j in range(prev_action.shape[1]):
+        prev_action[e, j] = 1.0
+    write_obs(
+        e,
+        env_par,
+        axle_par,
+        env_state,
+        axle_state,
+        wsp,
+        prev_wheel,
+        prev_action,
+        obs_par,
+        ctrl_dt,
+        obs,
+    )
+
+
+@njit(**KERNEL_FLAGS)
+def _env_step_one(
+    e,
+    mode,
+    actions,
+    valve_of_axle,
+    n_sub,
+    dt,
+    ctrl_dt,
+    cmd,
+    env_par,
+    axle_par,
+    sections,
+    env_state,
+    axle_state,
+    field,
+    env_acc,
+    axle_acc,
+    wsp,
+    prev_wheel,
+    prev_action,
+    obs_par,
+    reward_par,
+    obs,
+    terms,
+    flags,
+):
+    n_axles = axle_par.shape[1]
+    n_valves = actions.shape[1]
+    clipped = 0
+    bad = 0
+    for j in range(n_valves):
+        a = actions[e, j]
+        if mode == MODE_CONTINUOUS:
+            if math.isnan(a):
+                bad += 1
+                a = 1.0
+            elif a > 1.0 or a < -1.0:
+                clipped += 1
+                a = min(1.0, max(-1.0, a))
+        elif not (a == 0.0 or a == 1.0 or a == 2.0):
+            bad += 1
+            a = 2.0
+        prev_action[e, j] = a if mode == MODE_CONTINUOUS else a - 1.0
+    for k in range(n_axles):
+        a = actions[e, valve_of_axle[k]]
+        axle_state[e, k, AS_CMD] = cmd[e, k]  # acts during the valve dead time
+        if mode == MODE_CONTINUOUS:
+            a = 1.0 if math.isnan(a) else min(1.0, max(-1.0, a))
+            cmd[e, k] = 0.5 * (a + 1.0)
+        else:
+            cmd[e, k] = 0.0 if a == 0.0 else (CMD_HOLD if a == 1.0 else 1.0)
+    flags[e, F_CLIPPED] = clipped
+    flags[e, F_NAN] = bad
+    x0 = env_state[e, ES_X]
+    slide0 = 0.0
+    air0 = 0.0
+    for k in range(n_axles):
+        prev_wheel[e, k] = axle_state[e, k, AS_OMEGA] * axle_par[e, k, AP_RADIUS]
+        slide0 += axle_acc[e, k, AA_SLIDE_E]
+        air0 += axle_acc[e, k, AA_AIR_L]
+    _step_env(
+        e,
+        n_sub,
+        dt,
+        cmd,
+        env_par,
+        axle_par,
+        sections,
+        env_state,
+        axle_state,
+        field,
+        env_acc,
+        axle_acc,
+    )
+    # --- WSP reference speed: the fastest wheel, falling at most at the deceleration limit ------
+    v_ref = wsp[e, W_VREF]
+    fastest = 0.0
+    for k in range(n_axles):
+        fastest = max(fastest, axle_state[e, k, AS_OMEGA] * axle_par[e, k, AP_RADIUS])
+    v_ref = max(fastest, v_ref - obs_par[OP_REF_DECEL_LIMIT] * ctrl_dt)
+    v_ref = min(v_ref, wsp[e, W_VREF] + obs_par[OP_REF_RISE_LIMIT] * ctrl_dt)
+    wsp[e, W_VREF] = v_ref
+    # --- reward terms ----------------------------------------------------------------------------
+    v = env_state[e, ES_V]
+    tol = max(reward_par[RP_SLIDE_TOL_KMH] / 3.6, reward_par[RP_SLIDE_TOL_REL] * v)
+    excess = 0.0
+    locked = 0.0
+    slide1 = 0.0
+    air1 = 0.0
+    for k in range(n_axles):
+        wheel = axle_state[e, k, AS_OMEGA] * axle_par[e, k, AP_RADIUS]
+        excess += max(0.0, v - wheel - tol)
+        if wheel < reward_par[RP_LOCK_SPEED] and v > 1.0:
+            locked += 1.0
+        slide1 += axle_acc[e, k, AA_SLIDE_E]
+        air1 += axle_acc[e, k, AA_AIR_L]
+    terms[e, R_DISTANCE] = -(env_state[e, ES_X] - x0) / reward_par[RP_DISTANCE_SCALE]
+    terms[e, R_SLIDE] = -reward_par[RP_W_SLIDE] * excess * ctrl_dt / reward_par[RP_SLIDE_SCALE]
+    terms[e, R_LOCK] = -reward_par[RP_W_LOCK] * locked * ctrl_dt
+    terms[e, R_ENERGY] = -reward_par[RP_W_ENERGY] * (slide1 - slide0) / reward_par[RP_ENERGY_SCALE]
+    terms[e, R_AIR] = -reward_par[RP_W_AIR] * (air1 - air0) / reward_par[RP_AIR_SCALE]
+    flags[e, F_TERMINATED] = 1 if env_state[e, ES_STOPPED] > 0.0 else 0
+    flags[e, F_TRUNCATED] = (
+        1 if flags[e, F_TERMINATED] == 0 and env_state[e, ES_T] >= obs_par[OP_MAX_TIME] else 0
+    )
+    write_obs(
+        e,
+        env_par,
+        axle_par,
+        env_state,
+        axle_state,
+        wsp,
+        prev_wheel,
+        prev_action,
+        obs_par,
+        ctrl_dt,
+        obs,
+    )
+
+
+@njit(**KERNEL_FLAGS)
+def env_step_serial(
+    mode,
+    actions,
+    valve_of_axle,
+    n_sub,
+    dt,
+    ctrl_dt,
+    cmd,
+    env_par,
+    axle_par,
+    sections,
+    env_state,
+    axle_state,
+    field,
+    env_acc,
+    axle_acc,
+    wsp,
+    prev_wheel,
+    prev_action,
+    obs_par,
+    reward_par,
+    obs,
+    terms,
+    flags,
+):
+    for e in range(env_par.shape[0]):
+        _env_step_one(
+            e,
+            mode,
+            actions,
+            valve_of_axle,
+            n_sub,
+            dt,
+            ctrl_dt,
+            cmd,
+            env_par,
+            axle_par,
+            sections,
+            env_state,
+            axle_state,
+            field,
+            env_acc,
+            axle_acc,
+            wsp,
+            prev_wheel,
+            prev_action,
+            obs_par,
+            reward_par,
+            obs,
+            terms,
+            flags,
+        )
+
+
+@njit(parallel=True, **KERNEL_FLAGS)
+def env_step_parallel(
+    mode,
+    actions,
+    valve_of_axle,
+    n_sub,
+    dt,
+    ctrl_dt,
+    cmd,
+    env_par,
+    axle_par,
+    sections,
+    env_state,
+    axle_state,
+    field,
+    env_acc,
+    axle_acc,
+    wsp,
+    prev_wheel,
+    prev_action,
+    obs_par,
+    reward_par,
+    obs,
+    terms,
+    flags,
+):
+    for e in prange(env_par.shape[0]):
+        _env_step_one(
+            e,
+            mode,
+            actions,
+            valve_of_axle,
+            n_sub,
+            dt,
+            ctrl_dt,
+            cmd,
+            env_par,
+            axle_par,
+            sections,
+            env_state,
+            axle_state,
+            field,
+            env_acc,
+            axle_acc,
+            wsp,
+            prev_wheel,
+            prev_action,
+            obs_par,
+            reward_par,
+            obs,
+            terms,
+            flags,
+        )
