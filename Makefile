@@ -27,6 +27,7 @@ format: $(STAMP)
 	$(BIN)/ruff format .
 
 bench: $(STAMP)
+	mkdir -p runs
 	$(BIN)/wsp-env bench --json runs/bench.json
 
 clean:

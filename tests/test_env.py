@@ -208,3 +208,18 @@ def test_sb3_ppo_trains_on_the_batched_env():
     obs = venv.reset()
     action, _ = model.predict(obs, deterministic=True)
     assert action.shape == (8, 4) and np.isfinite(action).all()
+
+
+def test_bench_quick_writes_contract_keys(tmp_path):
+    """`wsp-env bench --json` writes the DESIGN §8 keys (tiny counts: a smoke test, no timing)."""
+    import json
+
+    from wsp_env.cli import main
+
+    out = tmp_path / "bench.json"
+    assert main(["bench", "--quick", "--repeats", "1", "--json", str(out)]) == 0
+    result = json.loads(out.read_text())
+    for key in ("single_env_steps_per_s", "vector_env_steps_per_s", "vector_num_envs", "n_axles"):
+        assert key in result
+    assert result["vector_num_envs"] == 1024 and result["n_axles"] == 4
+    assert result["single_env_steps_per_s"] > 0 and result["cartpole_vector_steps_per_s"] > 0
