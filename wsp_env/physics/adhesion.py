@@ -206,6 +206,42 @@ def adhesion(law, axi, w, mu_level, mu_rec, k_w, k, inv_k, p0, p1, p2, p3):
     return keep * m + k_w * mu_rec * s, keep * m_xi + k_w * mu_rec * s_xi, keep * m_w
 
 
+PEAK_GRID = 64
+PEAK_XI_MIN, PEAK_XI_MAX = 1e-4, 0.6
+
+
+@njit(cache=True, error_model="numpy")
+def peak_adhesion(law, level, mu_rec, kw, k, inv_k, v, p0, p1, p2, p3):
+    """Creepage and coefficient at the peak of the curve ``mu(xi, DV = xi V)`` at speed ``v``.
+
+    A log grid of creepages (1e-4 .. 0.6) refined by a parabola through the best three points.
+    """
+    log_lo = math.log(PEAK_XI_MIN)
+    step = (math.log(PEAK_XI_MAX) - log_lo) / (PEAK_GRID - 1)
+    best_i = 0
+    best = -1.0
+    for i in range(PEAK_GRID):
+        xi = math.exp(log_lo + i * step)
+        m = adhesion(law, xi, xi * v, level, mu_rec, kw, k, inv_k, p0, p1, p2, p3)[0]
+        if m > best:
+            best = m
+            best_i = i
+    log_xi = log_lo + best_i * step
+    if 0 < best_i < PEAK_GRID - 1:
+        x0 = math.exp(log_xi - step)
+        x2 = math.exp(log_xi + step)
+        a = adhesion(law, x0, x0 * v, level, mu_rec, kw, k, inv_k, p0, p1, p2, p3)[0]
+        c = adhesion(law, x2, x2 * v, level, mu_rec, kw, k, inv_k, p0, p1, p2, p3)[0]
+        den = a - 2.0 * best + c
+        if den < 0.0:
+            log_xi += 0.5 * step * (a - c) / den
+    xi = math.exp(log_xi)
+    m = adhesion(law, xi, xi * v, level, mu_rec, kw, k, inv_k, p0, p1, p2, p3)[0]
+    if m < best:
+        return math.exp(log_lo + best_i * step), best
+    return xi, m
+
+
 def tustin_second_order(tau_s: float, zeta: float, dt_s: float) -> np.ndarray:
     """Coefficients ``[b0, b1, b2, a1, a2]`` of seed 002 Eq. 11 discretised by Eq. 13 (Tustin).
 

@@ -1,0 +1,320 @@
+"""Run a scenario suite with a policy — one code path for every policy — and summarise it.
+
+Every run of a suite (case x speed x seed) is one environment of a single batched core: all
+runs advance together, each policy sees exactly the same scenarios and seeds, and a run's
+metrics are taken the moment it stops (or hits the time limit).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import statistics
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from gymnasium.utils import seeding
+
+from wsp_env import env_kernel as K
+from wsp_env.config import ConfigError, _configs_root, from_dict, read_yaml
+from wsp_env.env import OPTION_KEYS, _BrakingCore
+from wsp_env.metrics import run_metrics
+from wsp_env.physics import layout as L
+from wsp_env.reference import reference_distance
+from wsp_env.trace_io import RunRecord
+
+CRITERIA_KEYS = ("max_extension_pct", "max_lock_s", "min_adhesion_utilisation")
+
+
+@dataclass(frozen=True)
+class CaseConfig:
+    name: str
+    rail: str
+    speeds_kmh: tuple[str, ...] = field(metadata={"nonempty": True})
+    mu_contaminated: float | None = field(default=None, metadata={"gt": 0.0})
+    pattern: str | None = field(
+        default=None, metadata={"choices": ("uniform", "step_up", "step_down", "patches")}
+    )
+    demand: str = field(default="emergency", metadata={"choices": ("emergency", "service")})
+    load_factor: float | None = field(default=None, metadata={"gt": 0.0})
+    gradient_permille: float | None = None
+    recovery_basis: str | None = field(
+        default=None, metadata={"choices": ("rail_metre", "wheel_metre", "sliding_power")}
+    )
+    axle_mu_factor: tuple[float, ...] | None = field(default=None, metadata={"gt": 0.0})
+    criteria: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class SuiteConfig:
+    name: str
+    description: str
+    seeds: tuple[int, ...] = field(metadata={"nonempty": True})
+    cases: tuple[CaseConfig, ...] = field(metadata={"nonempty": True})
+    criteria: dict[str, float] = field(default_factory=dict)
+
+    def validate(self, where: str) -> None:
+        prefix = f"{where}." if where else ""
+        for key in self.criteria:
+            if key not in CRITERIA_KEYS:
+                raise ConfigError(
+                    f"{prefix}criteria.{key}: unknown (one of {', '.join(CRITERIA_KEYS)})"
+                )
+        for i, case in enumerate(self.cases):
+            for key in case.criteria:
+                if key not in CRITERIA_KEYS:
+                    raise ConfigError(f"{prefix}cases[{i}].criteria.{key}: unknown criterion")
+            for s in case.speeds_kmh:
+                if s != "max":
+                    try:
+                        ok = float(s) > 0
+                    except ValueError:
+                        ok = False
+                    if not ok:
+                        raise ConfigError(
+                            f"{prefix}cases[{i}].speeds_kmh: {s!r} is not a speed or 'max'"
+                        )
+
+
+def load_suite(name_or_path: str) -> SuiteConfig:
+    """A suite by name (``quick``, ``en15595``, ``heldout``) or YAML path."""
+    p = Path(name_or_path)
+    if p.suffix not in (".yaml", ".yml"):
+        p = _configs_root() / "scenarios" / f"{name_or_path}.yaml"
+        if not p.exists():
+            known = sorted(q.stem for q in (_configs_root() / "scenarios").glob("*.yaml"))
+            raise ConfigError(f"suite: unknown suite {name_or_path!r} (known: {', '.join(known)})")
+    elif not p.exists():
+        raise ConfigError(f"{p}: no such file")
+    data = read_yaml(p)
+    if isinstance(data, dict):  # YAML reads bare numbers in speeds_kmh as numbers
+        for case in data.get("cases", []) or []:
+            if isinstance(case, dict) and isinstance(case.get("speeds_kmh"), list):
+                case["speeds_kmh"] = [str(s) for s in case["speeds_kmh"]]
+    try:
+        return from_dict(SuiteConfig, data)
+    except ConfigError as err:
+        raise ConfigError(f"{p}: {err}") from None
+
+
+@dataclass(frozen=True)
+class Run:
+    scenario: str
+    seed: int
+    options: dict[str, Any]
+    criteria: dict[str, float]
+
+
+def expand(suite: SuiteConfig, max_speed_kmh: float) -> list[Run]:
+    """Cases x speeds x seeds, in a fixed order."""
+    runs = []
+    for case in suite.cases:
+        for s in case.speeds_kmh:
+            speed = max_speed_kmh if s == "max" else float(s)
+            name = f"{case.name}_{int(round(speed))}"
+            options: dict[str, Any] = {"rail": case.rail, "speed_kmh": speed, "demand": case.demand}
+            for key in (
+                "mu_contaminated", "pattern", "load_factor", "gradient_permille",
+                "recovery_basis", "axle_mu_factor",
+            ):  # fmt: skip
+                value = getattr(case, key)
+                if value is not None:
+                    options[key] = value
+            assert set(options) <= set(OPTION_KEYS)
+            criteria = {**suite.criteria, **case.criteria}
+            runs.extend(Run(name, seed, options, criteria) for seed in suite.seeds)
+    return runs
+
+
+def _judge(metrics: dict[str, Any], criteria: dict[str, float]) -> dict[str, bool]:
+    checks = {}
+    if "max_extension_pct" in criteria:
+        checks["extension"] = metrics["extension_pct"] <= criteria["max_extension_pct"]
+    if "max_lock_s" in criteria:
+        checks["lock"] = metrics["max_lock_s"] <= criteria["max_lock_s"]
+    if "min_adhesion_utilisation" in criteria:
+        checks["utilisation"] = (
+            metrics["adhesion_utilisation"] >= criteria["min_adhesion_utilisation"]
+        )
+    return checks
+
+
+def run_suite(
+    vehicle: str,
+    suite: SuiteConfig,
+    policy: Any,
+    record: str = "first_seed",
+    progress: bool = False,
+    max_time_s: float = 600.0,
+    env_kwargs: dict[str, Any] | None = None,
+) -> tuple[list[dict[str, Any]], dict[tuple[str, int], RunRecord]]:
+    """Run every run of ``suite`` with ``policy``; return per-run results and recorded traces.
+
+    ``record``: ``"first_seed"`` records speeds and pressures of each scenario's first seed,
+    ``"all"`` every run, ``"none"`` nothing.
+    """
+    core = _BrakingCore(1, vehicle=vehicle, max_time_s=max_time_s, **(env_kwargs or {}))
+    runs = expand(suite, core.vehicle.max_speed_kmh)
+    core = _BrakingCore(len(runs), vehicle=vehicle, max_time_s=max_time_s, **(env_kwargs or {}))
+    reference = np.zeros(len(runs))
+    for e, run in enumerate(runs):
+        core.rngs[e] = seeding.np_random(run.seed)[0]
+        core.reset_env(e, run.options)
+        sim = core.sim
+        reference[e] = reference_distance(
+            sim.env_par, sim.axle_par, sim.sections, e, sim.speed_mps[e]
+        )
+    policy.bind(core)
+    policy.reset(np.arange(len(runs)))
+    first = {}
+    for e, run in enumerate(runs):
+        first.setdefault(run.scenario, e)
+    rec_ids = {
+        "none": [],
+        "all": list(range(len(runs))),
+        "first_seed": sorted(first.values()),
+    }[record]
+    rows: dict[int, list[np.ndarray]] = {e: [] for e in rec_ids}
+    sim = core.sim
+
+    def snapshot() -> None:
+        demand = sim.demand_bar()
+        for e in rec_ids:
+            if not done[e]:
+                rows[e].append(
+                    np.concatenate(
+                        [
+                            [
+                                sim.time_s[e],
+                                sim.speed_mps[e],
+                                demand[e],
+                                core.wsp[e, K.W_VREF],
+                                sim.env_state[e, L.ES_DECEL],
+                            ],
+                            sim.wheel_speed_mps[e],
+                            sim.pressure_bar[e],
+                        ]
+                    )  # fmt: skip
+                )
+
+    done = np.zeros(len(runs), dtype=bool)
+    results: list[dict[str, Any] | None] = [None] * len(runs)
+    n_steps = math.ceil(max_time_s / sim.control_period_s) + 1
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(runs), desc=f"{suite.name}: {policy.name}", unit="run", leave=False)
+    snapshot()
+    for _ in range(n_steps):
+        actions = policy.act(core.obs)
+        core.step(core.check_actions(actions))
+        snapshot()
+        ended = np.flatnonzero(
+            ~done & (core.flags[:, K.F_TERMINATED] | core.flags[:, K.F_TRUNCATED]).astype(bool)
+        )
+        for e in ended:
+            results[e] = _run_result(core, e, runs[e], reference[e], policy.name)
+            done[e] = True
+            sim.env_state[e, L.ES_STOPPED] = 1.0  # freeze a truncated run
+        if bar is not None and ended.size:
+            bar.update(ended.size)
+        if done.all():
+            break
+    if bar is not None:
+        bar.close()
+    for e in np.flatnonzero(~done):
+        results[e] = _run_result(core, e, runs[e], reference[e], policy.name)
+    n = core.n_axles
+    records = {}
+    for e in rec_ids:
+        a = np.asarray(rows[e])
+        keep = np.concatenate([[True], np.diff(a[:, 0]) > 1e-9])
+        a = a[keep]
+        p = a[:, 5 + n : 5 + 2 * n]
+        records[(runs[e].scenario, runs[e].seed)] = RunRecord(
+            time_s=a[:, 0],
+            v_train_kmh=3.6 * a[:, 1],
+            v_axle_kmh=3.6 * a[:, 5 : 5 + n],
+            p_cyl_bar=p,
+            p_demand_bar=a[:, 2],
+            a_train_mps2=a[:, 4],
+            v_ref_kmh=3.6 * a[:, 3],
+            wsp_active=p < a[:, 2:3] - 0.05,
+        )
+    return [r for r in results if r is not None], records
+
+
+def _run_result(core: Any, e: int, run: Run, reference_m: float, policy: str) -> dict[str, Any]:
+    m = run_metrics(core.sim, e)
+    d = m["stopping_distance_m"]
+    out = {
+        "scenario": run.scenario,
+        "seed": run.seed,
+        "policy": policy,
+        "stopping_distance_m": d,
+        "reference_distance_m": float(reference_m),
+        "extension_pct": 100.0 * (d / reference_m - 1.0) if reference_m > 0 else math.nan,
+        "adhesion_utilisation": reference_m / d if d > 0 else math.nan,
+        "stopping_time_s": m["stopping_time_s"],
+        "stopped": m["stopped"],
+        "sliding_energy_kJ": m["sliding_energy_kJ"],
+        "air_litres": m["air_litres"],
+        "max_lock_s": m["max_lock_s"],
+        "longest_vent_s": m["longest_vent_s"],
+        "axles": m["axles"],
+        "conditions": core.describe(e),
+    }
+    out["checks"] = _judge(out, run.criteria)
+    out["pass"] = bool(all(out["checks"].values())) and m["stopped"]
+    return out
+
+
+SUMMARY_KEYS = (
+    "stopping_distance_m",
+    "extension_pct",
+    "adhesion_utilisation",
+    "sliding_energy_kJ",
+    "air_litres",
+    "max_lock_s",
+)
+
+
+def _stats(values: list[float]) -> dict[str, float]:
+    return {
+        "mean": statistics.fmean(values),
+        "std": statistics.pstdev(values) if len(values) > 1 else 0.0,
+        "min": min(values),
+        "max": max(values),
+    }
+
+
+def summarise(results: list[dict[str, Any]]) -> dict[str, Any]:
+    """Per policy and scenario: mean, std, min, max of the key metrics and the pass count."""
+    out: dict[str, Any] = {}
+    for policy in sorted({r["policy"] for r in results}):
+        mine = [r for r in results if r["policy"] == policy]
+        per: dict[str, Any] = {}
+        for scenario in dict.fromkeys(r["scenario"] for r in mine):
+            runs = [r for r in mine if r["scenario"] == scenario]
+            per[scenario] = {k: _stats([r[k] for r in runs]) for k in SUMMARY_KEYS}
+            per[scenario]["mean_sliding_kmh"] = statistics.fmean(
+                a["mean_sliding_kmh"] for r in runs for a in r["axles"]
+            )
+            per[scenario]["passed"] = sum(r["pass"] for r in runs)
+            per[scenario]["runs"] = len(runs)
+        out[policy] = {
+            "scenarios": per,
+            "overall": {k: _stats([r[k] for r in mine]) for k in SUMMARY_KEYS},
+            "passed": sum(r["pass"] for r in mine),
+            "runs": len(mine),
+        }
+    return out
+
+
+def with_option(suite: SuiteConfig, **changes: Any) -> SuiteConfig:
+    """A copy of ``suite`` with every case changed (e.g. ``mu_contaminated``)."""
+    cases = tuple(dataclasses.replace(c, **changes) for c in suite.cases)
+    return dataclasses.replace(suite, cases=cases)
