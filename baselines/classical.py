@@ -14,9 +14,13 @@ The three tasks of a WSP (seed 002 Fig. 6):
    (re-accelerating faster than ``accel_hold_mps2``) or its slip is between the release level
    and the threshold; *apply* otherwise.
 
-Plus **periodic release** (after ``periodic_release_interval_s`` of uninterrupted WSP activity
-one axle, in turn from the last, is vented for ``periodic_release_duration_s`` so that it spins
-up and re-anchors the reference) and the
+Plus **periodic release** (``periodic_release_interval_s`` after the last re-anchoring, if the
+WSP has acted since, one axle, in turn from the last, is vented for at least
+``periodic_release_duration_s`` and on
+until it stops spinning up, at most ``periodic_release_max_s``; its speed then re-anchors the
+reference, and the drop between two anchors gives the train's deceleration, from which the
+reference slope during WSP activity adapts: ``ref_adapt_margin`` times it, within
+``[ref_decel_min_mps2, ref_decel_limit_mps2]``) and the
 **safety timer**: an axle venting continuously for longer than ``safety_timer_s`` gets the full
 demand back until standstill (EN 15595 §5.1.4 "WSP watchdog"; Open Rails uses 7 s).
 
@@ -50,6 +54,10 @@ class WSPConfig:
     safety_timer_s: float = field(default=7.0, metadata={"gt": 0.0})
     periodic_release_interval_s: float = field(default=4.0, metadata={"gt": 0.0})
     periodic_release_duration_s: float = field(default=0.4, metadata={"ge": 0.0})
+    periodic_release_max_s: float = field(default=1.5, metadata={"ge": 0.0})
+    release_accel_done_mps2: float = field(default=0.5, metadata={"ge": 0.0})
+    ref_decel_min_mps2: float = field(default=0.3, metadata={"gt": 0.0})
+    ref_adapt_margin: float = field(default=1.2, metadata={"ge": 1.0})
     min_speed_kmh: float = field(default=3.0, metadata={"ge": 0.0})
 
 
@@ -86,9 +94,16 @@ class ClassicalWSP:
         self.v_ref = np.zeros(n)
         self.venting_for = np.zeros((n, na))  # s of continuous venting
         self.locked_out = np.zeros((n, na), dtype=bool)
-        self.since_clean = np.zeros(n)  # s of uninterrupted WSP activity since the last release
+        self.since_clean = np.zeros(n)  # s since the last re-anchoring, once the WSP has acted
         self.active = np.zeros(n, dtype=bool)  # some valve out of apply in the last period
-        self.release_left = np.zeros(n)  # s of periodic release still to run
+        self.worked = np.zeros(n, dtype=bool)  # the WSP has acted since the last anchoring
+        self.release_left = np.zeros(n)  # s of the minimum periodic release still to run
+        self.release_time = np.zeros(n)  # s the current periodic release has lasted
+        self.releasing = np.zeros(n, dtype=bool)
+        self.ref_slope = np.zeros(n)  # m/s^2 the reference may fall while the WSP works
+        self.t = np.zeros(n)
+        self.anchor_v = np.full(n, np.nan)  # train speed at the last re-anchoring
+        self.anchor_t = np.zeros(n)
         self.release_axle = np.zeros(n, dtype=np.int64)
         self.next_release = np.zeros(n, dtype=np.int64)
         self._rows = np.arange(n)
@@ -99,8 +114,28 @@ class ClassicalWSP:
         self.locked_out[env_ids] = False
         self.since_clean[env_ids] = 0.0
         self.active[env_ids] = False
+        self.worked[env_ids] = False
         self.release_left[env_ids] = 0.0
+        self.release_time[env_ids] = 0.0
+        self.releasing[env_ids] = False
+        self.ref_slope[env_ids] = self.cfg.ref_decel_active_mps2
+        self.t[env_ids] = 0.0
+        self.anchor_v[env_ids] = np.nan
         self.next_release[env_ids] = self.n_axles - 1  # the last axle first
+
+    def _anchor(self, rows: np.ndarray, wheel: np.ndarray) -> None:
+        """A released wheel has spun up to the train speed: re-anchor, adapt the slope."""
+        cfg = self.cfg
+        span = self.t[rows] - self.anchor_t[rows]
+        ok = np.isfinite(self.anchor_v[rows]) & (span > 1.0)
+        est = (self.anchor_v[rows] - wheel) / np.maximum(span, 1e-9)
+        slope = np.clip(
+            cfg.ref_adapt_margin * est, cfg.ref_decel_min_mps2, cfg.ref_decel_limit_mps2
+        )
+        self.ref_slope[rows] = np.where(ok, slope, self.ref_slope[rows])
+        self.v_ref[rows] = np.maximum(self.v_ref[rows], wheel)
+        self.anchor_v[rows] = wheel
+        self.anchor_t[rows] = self.t[rows]
 
     def act(self, obs: np.ndarray) -> np.ndarray:
         cfg, na, dt = self.cfg, self.n_axles, self.dt
@@ -111,7 +146,8 @@ class ClassicalWSP:
         # 1. reference speed
         fastest = v.max(axis=1)
         fresh = ~np.isfinite(self.v_ref)
-        limit = np.where(self.active, cfg.ref_decel_active_mps2, cfg.ref_decel_limit_mps2)
+        self.t += dt
+        limit = np.where(self.active, self.ref_slope, cfg.ref_decel_limit_mps2)
         self.v_ref = np.where(fresh, fastest, np.maximum(fastest, self.v_ref - limit * dt))
         v_ref = self.v_ref[:, None]
         # 2. slide detection
@@ -126,18 +162,32 @@ class ClassicalWSP:
         # periodic release: while the WSP works without pause, release one axle now and then
         # so that it spins up to the train speed and re-anchors the reference
         self.active = (state != APPLY).any(axis=1)
-        self.since_clean = np.where(self.active, self.since_clean + dt, 0.0)
-        start = (self.since_clean > cfg.periodic_release_interval_s) & (self.release_left <= 0)
+        self.worked |= self.active
+        self.since_clean = np.where(self.worked, self.since_clean + dt, 0.0)
+        start = (self.since_clean > cfg.periodic_release_interval_s) & ~self.releasing & self.active
         if start.any():
             self.release_axle[start] = self.next_release[start]
             self.next_release[start] = (self.next_release[start] - 1) % na
             self.release_left[start] = cfg.periodic_release_duration_s
+            self.release_time[start] = 0.0
+            self.releasing |= start
             self.since_clean[start] = 0.0
-        releasing = self.release_left > 0
-        if releasing.any():
-            rows = self._rows[releasing]
-            state[rows, self.release_axle[releasing]] = VENT
-            self.release_left[releasing] -= dt
+        if self.releasing.any():
+            rows = self._rows[self.releasing]
+            axle = self.release_axle[self.releasing]
+            # run at least the minimum time, then until the wheel has stopped spinning up
+            still = (self.release_left[self.releasing] > 0) | (
+                -decel[rows, axle] > cfg.release_accel_done_mps2
+            )
+            still &= self.release_time[self.releasing] < cfg.periodic_release_max_s
+            state[rows[still], axle[still]] = VENT
+            self.release_left[rows] -= dt
+            self.release_time[rows] += dt
+            done = rows[~still]
+            if done.size:
+                self._anchor(done, v[done, self.release_axle[done]])
+                self.releasing[done] = False
+                self.worked[done] = False
         # safety timer: continuous venting beyond the limit restores braking until standstill
         self.venting_for = np.where(state == VENT, self.venting_for + dt, 0.0)
         self.locked_out |= self.venting_for > cfg.safety_timer_s

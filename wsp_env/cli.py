@@ -177,6 +177,85 @@ def _print_simulate(result: dict[str, Any]) -> None:
         print(f"  wrote {p}")
 
 
+# ---- evaluate -------------------------------------------------------------------------------
+
+
+def _add_evaluate(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "evaluate",
+        help="run a scenario suite with one or more policies; JSON and Markdown report",
+        description="Runs every scenario x speed x seed of a suite with each policy (same "
+        "scenarios and seeds for all, one code path). Policies: classical, none, oracle, or a "
+        "trained model file.",
+    )
+    p.add_argument(
+        "--policy",
+        action="append",
+        required=True,
+        help="classical | none | oracle | PATH (repeat to compare)",
+    )
+    p.add_argument("--suite", default="quick", help="quick | en15595 | heldout | PATH.yaml")
+    p.add_argument("--vehicle", default="uic_z1", help="vehicle id or YAML path (uic_z1)")
+    p.add_argument("--wsp-config", default=None, help="thresholds of the classical WSP (YAML)")
+    p.add_argument("--json", dest="json_path", default=None, help="write the result here")
+    p.add_argument("--report", default=None, help="write report.md and plots into this folder")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=cmd_evaluate)
+
+
+def cmd_evaluate(args: argparse.Namespace) -> dict[str, Any]:
+    from wsp_env.evaluation import load_suite, run_suite, summarise
+    from wsp_env.policy import make_policy
+
+    suite = load_suite(args.suite)
+    load_vehicle(args.vehicle)  # fail early with a clear message
+    policies = []
+    for name in args.policy:
+        try:
+            policies.append(make_policy(name, args.wsp_config))
+        except FileNotFoundError as err:
+            raise UserError(f"--policy: {err}") from None
+    results, records = [], {}
+    for pol in policies:
+        res, rec = run_suite(
+            args.vehicle, suite, pol, record="first_seed" if args.report else "none",
+            progress=not args.no_progress and sys.stderr.isatty(),
+        )  # fmt: skip
+        results.extend(res)
+        records[pol.name] = rec
+    summary = summarise(results)
+    payload = {
+        "suite": suite.name,
+        "vehicle": args.vehicle,
+        "policies": [p.name for p in policies],
+        "runs": results,
+        "summary": summary,
+    }
+    if args.report:
+        from wsp_env.report import write_report
+
+        payload["report"] = str(
+            write_report(args.report, suite, args.vehicle, results, summary, records)
+        )
+    return payload
+
+
+def _print_evaluate(result: dict[str, Any]) -> None:
+    print(f"suite {result['suite']} on {result['vehicle']}:")
+    for name, s in result["summary"].items():
+        o = s["overall"]
+        stop = o["stopping_distance_m"]
+        print(
+            f"  {name:10s} passed {s['passed']}/{s['runs']}  stop {stop['mean']:.0f} m "
+            f"(+-{stop['std']:.0f}), extension {o['extension_pct']['mean']:+.1f} %, "
+            f"utilisation {o['adhesion_utilisation']['mean']:.2f}, sliding energy "
+            f"{o['sliding_energy_kJ']['mean']:.0f} kJ, air {o['air_litres']['mean']:.0f} l, "
+            f"longest lock {o['max_lock_s']['max']:.1f} s"
+        )
+    if result.get("report"):
+        print(f"  wrote {result['report']}")
+
+
 # ---- bench ----------------------------------------------------------------------------------
 
 
@@ -216,11 +295,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", required=True)
     _add_simulate(sub)
+    _add_evaluate(sub)
     _add_bench(sub)
     return parser
 
 
-PRINTERS = {"simulate": _print_simulate, "bench": _print_bench}
+PRINTERS = {"simulate": _print_simulate, "evaluate": _print_evaluate, "bench": _print_bench}
 
 
 def main(argv: list[str] | None = None) -> int:

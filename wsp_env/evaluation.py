@@ -113,7 +113,7 @@ def expand(suite: SuiteConfig, max_speed_kmh: float) -> list[Run]:
     for case in suite.cases:
         for s in case.speeds_kmh:
             speed = max_speed_kmh if s == "max" else float(s)
-            name = f"{case.name}_{int(round(speed))}"
+            name = f"{case.name}_{round(speed)}"
             options: dict[str, Any] = {"rail": case.rail, "speed_kmh": speed, "demand": case.demand}
             for key in (
                 "mu_contaminated", "pattern", "load_factor", "gradient_permille",
@@ -183,21 +183,9 @@ def run_suite(
         demand = sim.demand_bar()
         for e in rec_ids:
             if not done[e]:
-                rows[e].append(
-                    np.concatenate(
-                        [
-                            [
-                                sim.time_s[e],
-                                sim.speed_mps[e],
-                                demand[e],
-                                core.wsp[e, K.W_VREF],
-                                sim.env_state[e, L.ES_DECEL],
-                            ],
-                            sim.wheel_speed_mps[e],
-                            sim.pressure_bar[e],
-                        ]
-                    )  # fmt: skip
-                )
+                head = [sim.time_s[e], sim.speed_mps[e], demand[e], core.wsp[e, K.W_VREF]]
+                head.append(sim.env_state[e, L.ES_DECEL])
+                rows[e].append(np.concatenate([head, sim.wheel_speed_mps[e], sim.pressure_bar[e]]))
 
     done = np.zeros(len(runs), dtype=bool)
     results: list[dict[str, Any] | None] = [None] * len(runs)
