@@ -16,6 +16,8 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	mkdir -p runs/demo
 	$(BIN)/wsp-env simulate --json runs/demo/simulate.json --plot runs/demo/simulate.png --trace runs/demo/trace
+	$(BIN)/wsp-env evaluate --policy classical --policy none --policy oracle --suite quick \
+		--json runs/demo/evaluate.json --report runs/demo/report
 
 test: $(STAMP)
 	$(BIN)/ruff check .

@@ -44,20 +44,22 @@ VENT, HOLD, APPLY = 0, 1, 2
 
 @dataclass(frozen=True)
 class WSPConfig:
+    """Thresholds (defaults = configs/wsp/classical.yaml, tuned on the en15595 suite)."""
+
     ref_decel_limit_mps2: float = field(default=1.2, metadata={"gt": 0.0})
-    ref_decel_active_mps2: float = field(default=0.7, metadata={"gt": 0.0})
-    slip_abs_kmh: float = field(default=3.0, metadata={"gt": 0.0})
-    slip_rel: float = field(default=0.10, metadata={"ge": 0.0, "le": 1.0})
-    release_ratio: float = field(default=0.5, metadata={"gt": 0.0, "le": 1.0})
-    decel_vent_mps2: float = field(default=4.0, metadata={"gt": 0.0})
-    accel_hold_mps2: float = field(default=1.5, metadata={"ge": 0.0})
+    ref_decel_active_mps2: float = field(default=0.98, metadata={"gt": 0.0})
+    slip_abs_kmh: float = field(default=2.8, metadata={"gt": 0.0})
+    slip_rel: float = field(default=0.26, metadata={"ge": 0.0, "le": 1.0})
+    release_ratio: float = field(default=0.44, metadata={"gt": 0.0, "le": 1.0})
+    decel_vent_mps2: float = field(default=5.8, metadata={"gt": 0.0})
+    accel_hold_mps2: float = field(default=2.5, metadata={"ge": 0.0})
     safety_timer_s: float = field(default=7.0, metadata={"gt": 0.0})
-    periodic_release_interval_s: float = field(default=4.0, metadata={"gt": 0.0})
+    periodic_release_interval_s: float = field(default=2.6, metadata={"gt": 0.0})
     periodic_release_duration_s: float = field(default=0.4, metadata={"ge": 0.0})
     periodic_release_max_s: float = field(default=1.5, metadata={"ge": 0.0})
     release_accel_done_mps2: float = field(default=0.5, metadata={"ge": 0.0})
     ref_decel_min_mps2: float = field(default=0.3, metadata={"gt": 0.0})
-    ref_adapt_margin: float = field(default=1.2, metadata={"ge": 1.0})
+    ref_adapt_margin: float = field(default=1.24, metadata={"ge": 1.0})
     min_speed_kmh: float = field(default=3.0, metadata={"ge": 0.0})
 
 

@@ -15,8 +15,8 @@ import dataclasses
 from pathlib import Path
 
 import numpy as np
-from wsp_env.baselines.classical import ClassicalWSP, WSPConfig, load_wsp_config
 
+from wsp_env.baselines.classical import ClassicalWSP, WSPConfig, load_wsp_config
 from wsp_env.config import _configs_root
 from wsp_env.evaluation import load_suite, run_suite
 from wsp_env.plotting import plot_run

@@ -195,6 +195,7 @@ def test_sb3_ppo_trains_on_the_batched_env():
     """A few thousand PPO steps through the native vector env adapter."""
     import torch
     from stable_baselines3 import PPO
+
     from wsp_env.agents.sb3_vec import SB3VecEnv
 
     torch.set_num_threads(1)

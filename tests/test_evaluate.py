@@ -6,8 +6,8 @@ import json
 
 import numpy as np
 import pytest
-from wsp_env.baselines.classical import ClassicalWSP, load_wsp_config
 
+from wsp_env.baselines.classical import ClassicalWSP, load_wsp_config
 from wsp_env.cli import main
 from wsp_env.config import ConfigError, _configs_root
 from wsp_env.evaluation import load_suite, run_suite, summarise

@@ -408,3 +408,16 @@ def test_plot_run_writes_png(tmp_path: Path) -> None:
     assert os.listdir(out.parent) == ["run.png"]  # no temp file left
     if os.environ.get("WSP_KEEP_PLOT"):  # for looking at the figure by eye
         Path(os.environ["WSP_KEEP_PLOT"]).write_bytes(data)
+
+
+def test_written_files_get_the_usual_permissions(tmp_path):
+    """Atomic writes go through mkstemp (mode 0600); the final files must be readable."""
+    import os
+    import stat
+
+    from wsp_env.trace_io import write_atomically
+
+    target = write_atomically(tmp_path / "x.txt", lambda fh: fh.write("hi"))
+    mask = os.umask(0)
+    os.umask(mask)
+    assert stat.S_IMODE(target.stat().st_mode) == 0o666 & ~mask

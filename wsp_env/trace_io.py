@@ -350,6 +350,15 @@ def _json_default(obj: Any) -> Any:
     raise TypeError(f"metadata value of type {type(obj).__name__} is not JSON serialisable")
 
 
+def _current_umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+_UMASK = _current_umask()
+
+
 def _write_temp(target: Path, write: Callable[[IO[Any]], None], binary: bool = False) -> Path:
     """Write through ``write`` into a temp file next to ``target``; return the temp path.
 
@@ -357,6 +366,7 @@ def _write_temp(target: Path, write: Callable[[IO[Any]], None], binary: bool = F
     """
     fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
     tmp_path = Path(tmp)
+    os.chmod(tmp_path, 0o666 & ~_UMASK)  # mkstemp makes 0600; outputs get the usual mode
     try:
         fh_ctx = os.fdopen(fd, "wb") if binary else os.fdopen(fd, "w", encoding="utf-8", newline="")
         with fh_ctx as fh:
