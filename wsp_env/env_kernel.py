@@ -282,111 +282,18 @@ def _env_step_one(
     )
 
 
+ARG_ENV_PAR = 7  # position of env_par in the entry points' arguments
+
+
+# One signature for both entry points (the arguments of ``_env_step_one`` after ``e``); the
+# serial and ``prange`` variants are separate functions so that each gets its own cache entry.
 @njit(**KERNEL_FLAGS)
-def env_step_serial(
-    mode,
-    actions,
-    valve_of_axle,
-    n_sub,
-    dt,
-    ctrl_dt,
-    cmd,
-    env_par,
-    axle_par,
-    sections,
-    env_state,
-    axle_state,
-    field,
-    env_acc,
-    axle_acc,
-    wsp,
-    prev_wheel,
-    prev_action,
-    obs_par,
-    reward_par,
-    obs,
-    terms,
-    flags,
-):
-    for e in range(env_par.shape[0]):
-        _env_step_one(
-            e,
-            mode,
-            actions,
-            valve_of_axle,
-            n_sub,
-            dt,
-            ctrl_dt,
-            cmd,
-            env_par,
-            axle_par,
-            sections,
-            env_state,
-            axle_state,
-            field,
-            env_acc,
-            axle_acc,
-            wsp,
-            prev_wheel,
-            prev_action,
-            obs_par,
-            reward_par,
-            obs,
-            terms,
-            flags,
-        )
+def env_step_serial(*args):
+    for e in range(args[ARG_ENV_PAR].shape[0]):
+        _env_step_one(e, *args)
 
 
 @njit(parallel=True, **KERNEL_FLAGS)
-def env_step_parallel(
-    mode,
-    actions,
-    valve_of_axle,
-    n_sub,
-    dt,
-    ctrl_dt,
-    cmd,
-    env_par,
-    axle_par,
-    sections,
-    env_state,
-    axle_state,
-    field,
-    env_acc,
-    axle_acc,
-    wsp,
-    prev_wheel,
-    prev_action,
-    obs_par,
-    reward_par,
-    obs,
-    terms,
-    flags,
-):
-    for e in prange(env_par.shape[0]):
-        _env_step_one(
-            e,
-            mode,
-            actions,
-            valve_of_axle,
-            n_sub,
-            dt,
-            ctrl_dt,
-            cmd,
-            env_par,
-            axle_par,
-            sections,
-            env_state,
-            axle_state,
-            field,
-            env_acc,
-            axle_acc,
-            wsp,
-            prev_wheel,
-            prev_action,
-            obs_par,
-            reward_par,
-            obs,
-            terms,
-            flags,
-        )
+def env_step_parallel(*args):
+    for e in prange(args[ARG_ENV_PAR].shape[0]):
+        _env_step_one(e, *args)

@@ -430,46 +430,21 @@ def _step_env(
         env_state[e, ES_T_STOP] = env_state[e, ES_T]
 
 
+ARG_ENV_PAR = 3  # position of env_par in the arguments of _step_serial / _step_parallel
+
+
+# The arguments of ``_step_env`` after ``e``; serial and ``prange`` variants are separate
+# functions so that each gets its own cache entry.
 @njit(**KERNEL_FLAGS)
-def _step_serial(
-    n_sub, dt, cmd, env_par, axle_par, sections, env_state, axle_state, field, env_acc, axle_acc
-):
-    for e in range(env_par.shape[0]):
-        _step_env(
-            e,
-            n_sub,
-            dt,
-            cmd,
-            env_par,
-            axle_par,
-            sections,
-            env_state,
-            axle_state,
-            field,
-            env_acc,
-            axle_acc,
-        )
+def _step_serial(*args):
+    for e in range(args[ARG_ENV_PAR].shape[0]):
+        _step_env(e, *args)
 
 
 @njit(parallel=True, **KERNEL_FLAGS)
-def _step_parallel(
-    n_sub, dt, cmd, env_par, axle_par, sections, env_state, axle_state, field, env_acc, axle_acc
-):
-    for e in prange(env_par.shape[0]):
-        _step_env(
-            e,
-            n_sub,
-            dt,
-            cmd,
-            env_par,
-            axle_par,
-            sections,
-            env_state,
-            axle_state,
-            field,
-            env_acc,
-            axle_acc,
-        )
+def _step_parallel(*args):
+    for e in prange(args[ARG_ENV_PAR].shape[0]):
+        _step_env(e, *args)
 
 
 PARALLEL_MIN_ENVS = 64  # below this, thread start-up costs more than it saves
