@@ -1,0 +1,292 @@
+"""Reading measured braking traces (``TRACE_FORMAT.md``, ``wsp-trace/1``) for calibration.
+
+``read_trace(csv_path)`` reads ``NAME.csv`` and ``NAME.meta.json``, accepts the BCU's vendor
+channel names (converting units), validates, fills short gaps and returns a :class:`Trace`.
+Every problem raises :class:`TraceError` with one line naming the file, the column or field and
+what is wrong. Input files are only read, never modified.
+
+Checks: metadata present, valid JSON, ``format`` and required fields; axle count of the metadata
+against the columns; required columns present, numeric and not mostly empty; time strictly
+increasing; gaps of more than ``MAX_GAP`` samples in a required column; physically implausible
+values for the stated unit (a speed column in m/s or a pressure column in kPa, negative speeds).
+Gaps of up to ``MAX_GAP`` samples are interpolated linearly in time and listed in
+``Trace.notes``.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+FORMAT = "wsp-trace/1"
+MAX_GAP = 3  # samples: longer runs of missing values in a required column are an error
+MAX_SPEED_KMH = 500.0
+MAX_PRESSURE_BAR = 12.0
+CONTAMINANTS = ("dry", "wet", "soap", "oil", "leaves", "unknown")
+
+
+class TraceError(ValueError):
+    """A malformed trace; ``str(err)`` is one line naming file, column or field."""
+
+
+@dataclass
+class Trace:
+    """A validated trace in the canonical units of ``TRACE_FORMAT.md``."""
+
+    path: Path
+    meta: dict[str, Any]
+    time_s: np.ndarray
+    v_train_kmh: np.ndarray
+    v_axle_kmh: np.ndarray  # (T, n_axles)
+    p_cyl_bar: np.ndarray  # (T, n_axles)
+    optional: dict[str, np.ndarray] = field(default_factory=dict)  # v_ref_kmh, a_train_mps2, ...
+    extra: dict[str, np.ndarray] = field(default_factory=dict)  # unknown columns, kept
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def n_axles(self) -> int:
+        return self.v_axle_kmh.shape[1]
+
+    @property
+    def vehicle(self) -> dict[str, Any]:
+        return self.meta["vehicle"]
+
+
+# vendor name -> (canonical name, factor) ; see TRACE_FORMAT.md "Vendor channel names"
+_VENDOR_FIXED = {
+    "time": ("time_s", 1.0),
+    "vtrain": ("v_train_kmh", 3.6),
+    "vref": ("v_ref_kmh", 3.6),
+    "dec_train": ("a_train_mps2", 1.0),
+    "ed": ("ed_force_kN", 1e-3),
+}
+_VENDOR_AXLE = [
+    (re.compile(r"^vites_fc_ax(\d+)$"), "v_axle_{}_kmh", 1.0),
+    (re.compile(r"^p_cyl(\d+)$"), "p_cyl_{}_bar", 1.0),
+]
+_OPTIONAL = ("v_ref_kmh", "a_train_mps2", "p_demand_bar")
+
+
+def _fail(path: Path, what: str) -> TraceError:
+    return TraceError(f"{path}: {what}")
+
+
+def _read_meta(csv_path: Path) -> tuple[Path, dict[str, Any]]:
+    name = csv_path.name[:-4] if csv_path.name.endswith(".csv") else csv_path.stem
+    meta_path = csv_path.with_name(f"{name}.meta.json")
+    if not meta_path.exists():
+        raise _fail(meta_path, "metadata file missing (expected next to the CSV)")
+    try:
+        meta = json.loads(meta_path.read_text())
+    except json.JSONDecodeError as err:
+        raise _fail(meta_path, f"invalid JSON (line {err.lineno}: {err.msg})") from None
+    if not isinstance(meta, dict):
+        raise _fail(meta_path, "expected a JSON object")
+    if meta.get("format") != FORMAT:
+        raise _fail(meta_path, f"format: expected {FORMAT!r}, got {meta.get('format')!r}")
+    veh = meta.get("vehicle")
+    if not isinstance(veh, dict):
+        raise _fail(meta_path, "vehicle: missing or not an object")
+    for key in ("mass_kg", "wheel_radius_m", "n_axles"):
+        value = veh.get(key)
+        if isinstance(value, bool) or not isinstance(value, int | float) or not value > 0:
+            raise _fail(meta_path, f"vehicle.{key}: missing or not a positive number")
+    if int(veh["n_axles"]) != veh["n_axles"]:
+        raise _fail(meta_path, "vehicle.n_axles: must be a whole number")
+    period = meta.get("sample_period_s")
+    if isinstance(period, bool) or not isinstance(period, int | float) or not period > 0:
+        raise _fail(meta_path, "sample_period_s: missing or not a positive number")
+    if meta.get("contaminant", "unknown") not in CONTAMINANTS:
+        raise _fail(meta_path, f"contaminant: {meta['contaminant']!r} not one of {CONTAMINANTS}")
+    loads = veh.get("axle_static_load_kN")
+    if loads is not None and (not isinstance(loads, list) or len(loads) != veh["n_axles"]):
+        raise _fail(meta_path, "vehicle.axle_static_load_kN: must list one load per axle")
+    return meta_path, meta
+
+
+def _read_csv(path: Path) -> tuple[list[str], list[list[str]]]:
+    try:
+        with path.open(newline="") as fh:
+            rows = list(csv.reader(fh))
+    except FileNotFoundError:
+        raise _fail(path, "no such file") from None
+    except (OSError, UnicodeDecodeError) as err:
+        raise _fail(path, f"cannot read ({err})") from None
+    if not rows or not any(h.strip() for h in rows[0]):
+        raise _fail(path, "empty file (no header line)")
+    header = [h.strip() for h in rows[0]]
+    seen = set()
+    for h in header:
+        if h in seen:
+            raise _fail(path, f"column {h!r}: appears twice in the header")
+        seen.add(h)
+    body = [r for r in rows[1:] if any(c.strip() for c in r)]
+    for i, r in enumerate(body, start=2):
+        if len(r) != len(header):
+            raise _fail(path, f"line {i}: {len(r)} fields, header has {len(header)}")
+    if len(body) < 3:
+        raise _fail(path, f"only {len(body)} data rows (need at least 3)")
+    return header, body
+
+
+def _column(path: Path, name: str, cells: list[str]) -> np.ndarray:
+    out = np.empty(len(cells))
+    for i, c in enumerate(cells):
+        c = c.strip()
+        if c == "":
+            out[i] = np.nan
+            continue
+        try:
+            out[i] = float(c)
+        except ValueError:
+            raise _fail(path, f"column {name!r}: non-numeric value {c!r} on line {i + 2}") from None
+        if math.isinf(out[i]):
+            raise _fail(path, f"column {name!r}: infinite value on line {i + 2}")
+    return out
+
+
+def _canonical(path: Path, header: list[str], body: list[list[str]]) -> tuple[dict, list[str]]:
+    """Columns under canonical names, in canonical units; vendor aliases converted."""
+    notes: list[str] = []
+    raw = {h: _column(path, h, [r[j] for r in body]) for j, h in enumerate(header)}
+    cols: dict[str, np.ndarray] = {}
+    for name, values in raw.items():
+        target, factor = name, 1.0
+        if name in _VENDOR_FIXED:
+            target, factor = _VENDOR_FIXED[name]
+        for pattern, template, f in _VENDOR_AXLE:
+            m = pattern.match(name)
+            if m:
+                target, factor = template.format(int(m.group(1))), f
+        if target != name:
+            if target in raw:
+                raise _fail(
+                    path, f"column {name!r}: vendor alias of {target!r}, which is also present"
+                )
+            notes.append(
+                f"column {name!r} read as {target!r}" + (f" (x {factor:g})" if factor != 1 else "")
+            )
+        cols[target] = values * factor
+    if "time_camp" in raw and "time_s" not in cols:
+        period = raw["time_camp"]
+        if np.isnan(period).any() or (period <= 0).any():
+            raise _fail(path, "column 'time_camp': sample periods must be positive, without gaps")
+        cols["time_s"] = np.concatenate([[0.0], np.cumsum(period[:-1])])
+        notes.append("column 'time_camp' (sample period) integrated into 'time_s'")
+    return cols, notes
+
+
+def _fill_gaps(
+    path: Path, name: str, values: np.ndarray, t: np.ndarray, notes: list[str]
+) -> np.ndarray:
+    missing = np.isnan(values)
+    if not missing.any():
+        return values
+    if missing.mean() > 0.5:
+        raise _fail(path, f"column {name!r}: mostly empty ({missing.mean():.0%} missing)")
+    # runs of missing samples
+    edges = np.diff(np.concatenate([[0], missing.astype(int), [0]]))
+    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    longest = int((ends - starts).max())
+    if longest > MAX_GAP:
+        i = int(starts[np.argmax(ends - starts)])
+        raise _fail(
+            path,
+            f"column {name!r}: {longest} missing samples in a row from t = {t[i]:.3f} s "
+            f"(at most {MAX_GAP} are interpolated)",
+        )
+    if missing[0] or missing[-1]:
+        raise _fail(path, f"column {name!r}: missing value at the start or end of the record")
+    filled = values.copy()
+    filled[missing] = np.interp(t[missing], t[~missing], values[~missing])
+    notes.append(f"column {name!r}: {int(missing.sum())} missing samples interpolated")
+    return filled
+
+
+def read_trace(csv_path: str | Path) -> Trace:
+    """Read and validate ``NAME.csv`` + ``NAME.meta.json`` (see the module docstring)."""
+    path = Path(csv_path)
+    meta_path, meta = _read_meta(path)
+    header, body = _read_csv(path)
+    cols, notes = _canonical(path, header, body)
+    n = int(meta["vehicle"]["n_axles"])
+    axle_cols = sorted(
+        {int(m.group(1)) for c in cols if (m := re.match(r"^v_axle_(\d+)_kmh$", c))}
+        | {int(m.group(1)) for c in cols if (m := re.match(r"^p_cyl_(\d+)_bar$", c))}
+    )
+    if axle_cols and max(axle_cols) > n:
+        raise _fail(
+            meta_path,
+            f"vehicle.n_axles: {n}, but the CSV has columns for axle {max(axle_cols)}",
+        )
+    required = ["time_s", "v_train_kmh"] + [f"v_axle_{i}_kmh" for i in range(1, n + 1)]
+    required += [f"p_cyl_{i}_bar" for i in range(1, n + 1)]
+    for name in required:
+        if name not in cols:
+            raise _fail(path, f"column {name!r}: required but missing")
+    t = cols["time_s"]
+    if np.isnan(t).any():
+        raise _fail(
+            path, f"column 'time_s': empty cell on line {int(np.flatnonzero(np.isnan(t))[0]) + 2}"
+        )
+    bad = np.flatnonzero(np.diff(t) <= 0)
+    if bad.size:
+        raise _fail(
+            path,
+            f"column 'time_s': not strictly increasing at line {int(bad[0]) + 3} "
+            f"({t[bad[0]]:g} -> {t[bad[0] + 1]:g})",
+        )
+    for name in required[1:]:
+        cols[name] = _fill_gaps(path, name, cols[name], t, notes)
+    for name in _OPTIONAL:
+        if name in cols:
+            if np.isnan(cols[name]).mean() > 0.5:
+                notes.append(f"column {name!r}: mostly empty, ignored")
+                del cols[name]
+            else:
+                cols[name] = _fill_gaps(path, name, cols[name], t, notes)
+    _check_units(path, meta, cols, n)
+    v_axle = np.stack([cols[f"v_axle_{i}_kmh"] for i in range(1, n + 1)], axis=1)
+    p_cyl = np.stack([cols[f"p_cyl_{i}_bar"] for i in range(1, n + 1)], axis=1)
+    optional = {k: cols[k] for k in _OPTIONAL if k in cols}
+    known = set(required) | set(optional)
+    extra = {k: v for k, v in cols.items() if k not in known}
+    return Trace(path, meta, t, cols["v_train_kmh"], v_axle, p_cyl, optional, extra, notes)
+
+
+def _check_units(path: Path, meta: dict, cols: dict[str, np.ndarray], n: int) -> None:
+    """Values that cannot be in the stated unit (one line naming the column)."""
+    v0 = meta.get("initial_speed_kmh")
+    speeds = ["v_train_kmh"] + [f"v_axle_{i}_kmh" for i in range(1, n + 1)]
+    for name in speeds:
+        v = cols[name]
+        if np.nanmin(v) < -5.0:
+            raise _fail(path, f"column {name!r}: negative speed {np.nanmin(v):g} km/h")
+        if np.nanmax(v) > MAX_SPEED_KMH:
+            raise _fail(path, f"column {name!r}: {np.nanmax(v):g} km/h is not a plausible speed")
+    if isinstance(v0, int | float) and v0 > 20:
+        top = float(np.nanmax(cols["v_train_kmh"]))
+        if abs(top * 3.6 - v0) < 0.15 * v0 and abs(top - v0) > 0.3 * v0:
+            raise _fail(
+                path,
+                f"column 'v_train_kmh': peaks at {top:.1f}, initial_speed_kmh is {v0:g}: "
+                "looks like m/s, not km/h",
+            )
+    for i in range(1, n + 1):
+        name = f"p_cyl_{i}_bar"
+        p = cols[name]
+        if np.nanmax(p) > MAX_PRESSURE_BAR:
+            raise _fail(
+                path,
+                f"column {name!r}: {np.nanmax(p):g} bar is not a plausible cylinder pressure "
+                "(kPa or psi instead of bar?)",
+            )
+        if np.nanmin(p) < -0.5:
+            raise _fail(path, f"column {name!r}: negative pressure {np.nanmin(p):g} bar")
