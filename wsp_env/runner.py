@@ -14,7 +14,7 @@ import numpy as np
 from wsp_env.config import VehicleConfig
 from wsp_env.metrics import run_metrics
 from wsp_env.physics import layout as L
-from wsp_env.simulator import RunSetup, TrainSim
+from wsp_env.simulator import RunSetup, TrainSim, VehicleArrays
 from wsp_env.trace_io import RunRecord
 
 PHYSICS_POLICIES = ("none",)
@@ -71,7 +71,7 @@ def trace_metadata(
     vehicle: VehicleConfig, setup: RunSetup, rail_name: str, sample_period_s: float, test_id: str
 ) -> dict[str, Any]:
     """``*.meta.json`` of a simulated run: nominal vehicle data only (TRACE_FORMAT.md)."""
-    sim_arrays = TrainSim(vehicle, n_envs=1).arrays
+    sim_arrays = VehicleArrays.from_config(vehicle)
     gain, p_th = vehicle.brake.linear_torque()
     veh: dict[str, Any] = {
         "name": vehicle.name,
