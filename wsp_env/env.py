@@ -156,6 +156,7 @@ class _BrakingCore:
         reward: RewardConfig | dict | None = None,
         scenario: ScenarioConfig | dict | None = None,
         rails_config: str | None = None,
+        extra_rails: dict[str, RailConfig] | None = None,
         control_period_s: float = 0.02,
         substep_s: float = 1e-3,
         max_time_s: float = 300.0,
@@ -172,7 +173,7 @@ class _BrakingCore:
         self.vehicle = veh
         self.reward = _config(RewardConfig, reward, "reward")
         self.scenario = _config(ScenarioConfig, scenario, "scenario")
-        self.rails: dict[str, RailConfig] = load_rails(rails_config)
+        self.rails: dict[str, RailConfig] = {**load_rails(rails_config), **(extra_rails or {})}
         for name in self.scenario.rails:
             if name not in self.rails:
                 raise ConfigError(
