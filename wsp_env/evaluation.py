@@ -18,7 +18,14 @@ import numpy as np
 from gymnasium.utils import seeding
 
 from wsp_env import env_kernel as K
-from wsp_env.config import ConfigError, _configs_root, from_dict, load_vehicle, read_yaml
+from wsp_env.config import (
+    ConfigError,
+    VehicleConfig,
+    _configs_root,
+    from_dict,
+    load_vehicle,
+    read_yaml,
+)
 from wsp_env.env import OPTION_KEYS, _BrakingCore
 from wsp_env.metrics import run_metrics
 from wsp_env.physics import layout as L
@@ -142,7 +149,7 @@ def _judge(metrics: dict[str, Any], criteria: dict[str, float]) -> dict[str, boo
 
 
 def run_suite(
-    vehicle: str,
+    vehicle: str | VehicleConfig,
     suite: SuiteConfig,
     policy: Any,
     record: str = "first_seed",
@@ -155,7 +162,8 @@ def run_suite(
     ``record``: ``"first_seed"`` records speeds and pressures of each scenario's first seed,
     ``"all"`` every run, ``"none"`` nothing.
     """
-    runs = expand(suite, load_vehicle(vehicle).max_speed_kmh)
+    veh = vehicle if isinstance(vehicle, VehicleConfig) else load_vehicle(vehicle)
+    runs = expand(suite, veh.max_speed_kmh)
     core = _BrakingCore(len(runs), vehicle=vehicle, max_time_s=max_time_s, **(env_kwargs or {}))
     reference = np.zeros(len(runs))
     for e, run in enumerate(runs):

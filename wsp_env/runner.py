@@ -85,6 +85,12 @@ def trace_metadata(
             "torque_gain_Nm_per_bar": gain,
             "p_max_bar": vehicle.brake.p_max_bar,
         },
+        # nominal running resistance (an optional field: documents give it, traces may not)
+        "resistance": {
+            "a_N": vehicle.resistance.a_N,
+            "b_N_per_mps": vehicle.resistance.b_N_per_mps,
+            "c_N_per_mps2": vehicle.resistance.c_N_per_mps2,
+        },
     }
     if len(vehicle.cars) == 1:
         car, (b0, b1) = vehicle.cars[0], vehicle.bogies

@@ -1,0 +1,56 @@
+"""The three equation-error channels see their own effect families and stay at the noise floor
+on a trace without extra effects (DESIGN §7)."""
+
+from __future__ import annotations
+
+import pytest
+
+from wsp_env.calibration.residuals import channels
+from wsp_env.calibration.synthetic import simulate_trace
+from wsp_env.calibration.traces import read_trace
+from wsp_env.config import load_rail
+from wsp_env.trace_io import SensorModel
+
+SENSORS = SensorModel(sample_period_s=0.1, speed_noise_kmh=0.1, pressure_noise_bar=0.01)
+CASES = {
+    "clean": {},
+    "gradient": {"gradient_permille": -15.0},
+    "radius": {"wheel_radius_error": (0.0, 0.01, 0.0, 0.0)},
+    "adhesion_per_axle": {"axle_mu_factor": (0.6, 0.75, 0.9, 1.0)},
+}
+
+
+@pytest.fixture(scope="module")
+def rmse(tmp_path_factory):
+    d = tmp_path_factory.mktemp("res")
+    out = {}
+    for name, effect in CASES.items():
+        csv_path, _, _ = simulate_trace(
+            d / name, load_rail("soap"), 120.0, sensors=SENSORS, mu_contaminated=0.08,
+            pattern="uniform", **effect,
+        )  # fmt: skip
+        out[name] = {k: ch.rmse for k, ch in channels(read_trace(csv_path)).items()}
+    return out
+
+
+def test_clean_trace_sits_at_the_sensor_noise_floor(rmse):
+    assert rmse["clean"]["train_speed_balance_kmh"] < 0.3  # sensor noise 0.1 km/h
+    assert rmse["clean"]["coasting_creep_pct"] < 0.3
+
+
+def test_gradient_shows_in_the_train_speed_balance_only(rmse):
+    assert (
+        rmse["gradient"]["train_speed_balance_kmh"] > 20 * rmse["clean"]["train_speed_balance_kmh"]
+    )
+    assert rmse["gradient"]["coasting_creep_pct"] < 2 * rmse["clean"]["coasting_creep_pct"]
+
+
+def test_wheel_radius_shows_in_the_coasting_creep_only(rmse):
+    # 1 % on one axle of four: RMS over axles ~ 0.5 %
+    assert rmse["radius"]["coasting_creep_pct"] == pytest.approx(0.5, abs=0.15)
+    assert rmse["radius"]["train_speed_balance_kmh"] < 2 * rmse["clean"]["train_speed_balance_kmh"]
+
+
+def test_per_axle_adhesion_shows_in_the_adhesion_fit(rmse):
+    assert rmse["adhesion_per_axle"]["adhesion_fit_kN"] > 1.2 * rmse["clean"]["adhesion_fit_kN"]
+    assert rmse["adhesion_per_axle"]["coasting_creep_pct"] < 2 * rmse["clean"]["coasting_creep_pct"]

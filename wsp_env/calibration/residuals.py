@@ -1,0 +1,138 @@
+"""Equation-error channels that can see a missing effect (DESIGN §7, "Which error").
+
+An open-loop replay of measured pressures diverges from measured wheel speeds even with a
+perfect model (braked wheels under WSP are marginally stable), so each channel below closes the
+model on measured quantities and tests one equation:
+
+* **train-speed balance** (km/h): the train speed predicted from the measured pressures and
+  wheel speeds alone, through the brake and wheelset equations —
+  ``V(t) = V(0) - 1/M [ int (sum_i T_i / r + R(V)) dt + sum_i J (v_i(t) - v_i(0)) / r^2 ]`` with
+  ``T_i = gain (p_i - p_th)^+`` and ``R`` the nominal resistance (metadata ``resistance``, else
+  none) — against the measured train speed. Sees gradient, resistance, pad friction, unmeasured
+  brake forces, pressure lag, ground-speed sensor errors. Its floor is about the sensor noise.
+* **adhesion fit** (kN): the adhesion force from the wheelset equation (``adhesion_estimate``)
+  against the force of one Eq. 9 law, fitted to all axles, at each braked sample's measured
+  creepage. Sees position-dependent adhesion, load transfer, per-axle differences (cleaning).
+* **coasting creep** (%): apparent creepage ``(V - v_i) / V`` of each axle while it is unbraked
+  (the nominal model says 0). Sees wheel-radius errors and ground-speed sensor bias.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from wsp_env.calibration.adhesion_estimate import eq9, estimate_adhesion, fit_polach
+from wsp_env.calibration.traces import Trace
+
+MIN_SPEED_KMH = 10.0
+COAST_MIN_S = 2.0
+
+
+@dataclass
+class Channel:
+    """One residual channel: per-sample residual, the samples it is defined on, its RMSE."""
+
+    name: str
+    unit: str
+    residual: np.ndarray
+    mask: np.ndarray
+    rmse: float
+    detail: dict[str, float] = field(default_factory=dict)
+
+
+def _cumtrapz(t: np.ndarray, y: np.ndarray) -> np.ndarray:
+    return np.concatenate([[0.0], np.cumsum(0.5 * (y[1:] + y[:-1]) * np.diff(t))])
+
+
+def brake_force_N(trace: Trace) -> np.ndarray:
+    """(T, n_axles) brake force at the rail, ``gain (p - p_th)^+ / r``, from the metadata."""
+    veh = trace.vehicle
+    brake = veh.get("brake", {})
+    gain = float(brake.get("torque_gain_Nm_per_bar", 0.0))
+    p_th = float(brake.get("p_threshold_bar", 0.0))
+    return gain * np.maximum(0.0, trace.p_cyl_bar - p_th) / float(veh["wheel_radius_m"])
+
+
+def resistance_N(trace: Trace, v_mps: np.ndarray) -> np.ndarray:
+    res = trace.vehicle.get("resistance") or {}
+    a, b, c = (float(res.get(k, 0.0)) for k in ("a_N", "b_N_per_mps", "c_N_per_mps2"))
+    return a + v_mps * (b + v_mps * c)
+
+
+def train_speed_balance(trace: Trace) -> Channel:
+    veh = trace.vehicle
+    mass = float(veh["mass_kg"])
+    r = float(veh["wheel_radius_m"])
+    inertia = float(veh.get("wheelset_inertia_kgm2", 0.0))
+    t = trace.time_s
+    v = trace.v_train_kmh / 3.6
+    wheels = trace.v_axle_kmh / 3.6
+    force = brake_force_N(trace).sum(axis=1) + resistance_N(trace, v)
+    spin = inertia * (wheels - wheels[0]).sum(axis=1) / r**2
+    predicted = v[0] - (_cumtrapz(t, force) + spin) / mass
+    mask = trace.v_train_kmh > MIN_SPEED_KMH
+    residual = 3.6 * (v - predicted)
+    return Channel(
+        "train_speed_balance", "kmh", residual, mask, float(np.sqrt(np.mean(residual[mask] ** 2)))
+    )
+
+
+def adhesion_fit(trace: Trace) -> Channel:
+    axles = estimate_adhesion(trace, min_speed_kmh=MIN_SPEED_KMH)
+    brake = brake_force_N(trace)
+    braked = (brake > 0.05 * brake.max()) & (trace.v_train_kmh[:, None] > MIN_SPEED_KMH)
+    # one shared Eq. 9 law from all axles' critical points
+    pooled = axles[0]
+    for a in axles[1:]:
+        pooled = type(pooled)(
+            np.concatenate([pooled.mu, a.mu]),
+            np.concatenate([pooled.creepage, a.creepage]),
+            np.concatenate([pooled.sliding_kmh, a.sliding_kmh]),
+            np.concatenate([pooled.force_N, a.force_N]),
+            np.concatenate([pooled.normal_N, a.normal_N]),
+            np.concatenate([pooled.critical, a.critical + len(pooled.mu)]),
+        )
+    law = fit_polach(pooled)
+    residual = np.zeros_like(brake)
+    for i, a in enumerate(axles):
+        model = eq9(a.creepage, a.sliding_kmh, law.mu0, law.K, law.K_rozv) * a.normal_N
+        residual[:, i] = (a.force_N - model) / 1e3
+    rmse = float(np.sqrt(np.mean(residual[braked] ** 2))) if braked.any() else float("nan")
+    return Channel(
+        "adhesion_fit", "kN", residual, braked, rmse,
+        {"mu0": law.mu0, "K": law.K, "K_rozv": law.K_rozv},
+    )  # fmt: skip
+
+
+def coasting_creep(trace: Trace) -> Channel:
+    brake = trace.vehicle.get("brake", {})
+    p_th = float(brake.get("p_threshold_bar", 0.0))
+    v = trace.v_train_kmh
+    creep = 100.0 * (v[:, None] - trace.v_axle_kmh) / np.maximum(v[:, None], 1.0)
+    # coasting = unbraked since the start of the record (before the first application), or
+    # unbraked for COAST_MIN_S in a row: not a wheel spinning up after a WSP vent
+    unbraked = trace.p_cyl_bar < p_th + 0.05
+    mask = np.zeros_like(unbraked)
+    t = trace.time_s
+    for i in range(unbraked.shape[1]):
+        run_start = None
+        for k in range(len(t)):
+            if unbraked[k, i]:
+                run_start = k if run_start is None else run_start
+                if run_start == 0 or t[k] - t[run_start] >= COAST_MIN_S:
+                    mask[k, i] = True
+            else:
+                run_start = None
+    mask &= v[:, None] > MIN_SPEED_KMH
+    rmse = float(np.sqrt(np.mean(creep[mask] ** 2))) if mask.any() else float("nan")
+    return Channel("coasting_creep", "pct", creep, mask, rmse, {"samples": float(mask.sum())})
+
+
+def channels(trace: Trace) -> dict[str, Channel]:
+    """All three channels of the nominal model, keyed ``<name>_<unit>`` as in DESIGN §8."""
+    out = {}
+    for ch in (train_speed_balance(trace), adhesion_fit(trace), coasting_creep(trace)):
+        out[f"{ch.name}_{ch.unit}"] = ch
+    return out
