@@ -256,6 +256,53 @@ def _print_evaluate(result: dict[str, Any]) -> None:
         print(f"  wrote {result['report']}")
 
 
+# ---- calibrate ------------------------------------------------------------------------------
+
+
+def _add_calibrate(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "calibrate",
+        help="explain a measured trace: residual channels, effect discovery, error before/after",
+        description="Reads TRACE.csv (+ TRACE.meta.json next to it, wsp-trace/1), computes the "
+        "train-speed balance, adhesion fit and coasting creep residuals, and adds the physical "
+        "effects (BIC-scored) that explain them. Not yet: report, export.",
+    )
+    p.add_argument("trace", help="the trace CSV (metadata found next to it)")
+    p.add_argument("--json", dest="json_path", default=None, help="write the result here")
+    p.set_defaults(func=cmd_calibrate)
+
+
+def cmd_calibrate(args: argparse.Namespace) -> dict[str, Any]:
+    from wsp_env.calibration.discovery import discover
+    from wsp_env.calibration.traces import TraceError, read_trace
+
+    try:
+        trace = read_trace(args.trace)
+    except TraceError as err:
+        raise UserError(str(err)) from None
+    result = discover(trace)
+    return {
+        "trace": str(args.trace),
+        "errors_before": result.errors_before,
+        "errors_after": result.errors_after,
+        "added_effects": [s.as_dict() for s in result.added],
+        "candidates": result.considered,
+        "notes": trace.notes,
+    }
+
+
+def _print_calibrate(result: dict[str, Any]) -> None:
+    print(f"calibration of {result['trace']}:")
+    for key, before in result["errors_before"].items():
+        print(f"  {key:26s} {before:8.3f} -> {result['errors_after'][key]:8.3f}")
+    if not result["added_effects"]:
+        print("  nothing to add: the model explains the data")
+    for e in result["added_effects"]:
+        params = ", ".join(f"{k} {v:.4g}" for k, v in e["parameters"].items())
+        change = f"{e['before']:.3f} -> {e['after']:.3f}"
+        print(f"  added {e['category']} on {e['channel']}: {change} ({params})")
+
+
 # ---- bench ----------------------------------------------------------------------------------
 
 
@@ -296,11 +343,17 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
     _add_simulate(sub)
     _add_evaluate(sub)
+    _add_calibrate(sub)
     _add_bench(sub)
     return parser
 
 
-PRINTERS = {"simulate": _print_simulate, "evaluate": _print_evaluate, "bench": _print_bench}
+PRINTERS = {
+    "simulate": _print_simulate,
+    "evaluate": _print_evaluate,
+    "calibrate": _print_calibrate,
+    "bench": _print_bench,
+}
 
 
 def main(argv: list[str] | None = None) -> int:

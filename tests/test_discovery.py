@@ -1,0 +1,88 @@
+"""Effect discovery on synthetic traces whose metadata does not declare the injected effect."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from wsp_env.calibration.discovery import discover
+from wsp_env.calibration.synthetic import simulate_trace
+from wsp_env.calibration.traces import read_trace
+from wsp_env.cli import main
+from wsp_env.config import load_rail
+from wsp_env.trace_io import SensorModel
+
+SENSORS = SensorModel(sample_period_s=0.1, speed_noise_kmh=0.1, pressure_noise_bar=0.01)
+
+
+def _trace(tmp_path, name, seed=0, speed=120.0, sensors=SENSORS, **effect):
+    csv_path, _, _ = simulate_trace(
+        tmp_path / name, load_rail("soap"), speed, sensors=sensors, seed=seed,
+        mu_contaminated=0.08, pattern="uniform", **effect,
+    )  # fmt: skip
+    return csv_path
+
+
+@pytest.mark.parametrize("seed,speed", [(0, 120.0), (1, 100.0), (2, 140.0)])
+def test_no_extra_effect_nothing_added(tmp_path, seed, speed):
+    assert discover(read_trace(_trace(tmp_path, "clean", seed, speed))).added == []
+
+
+@pytest.mark.parametrize(
+    "effect,category,check",
+    [
+        ({"gradient_permille": -15.0}, "gradient", ("gradient_permille", -15.0, 0.1)),
+        ({"gradient_permille": 8.0}, "gradient", ("gradient_permille", 8.0, 0.15)),
+        ({"pad_factor": 0.85}, "pad_friction", ("scale", 0.85, 0.03)),
+        (
+            {"wheel_radius_error": (0.0, 0.01, 0.0, 0.0)},
+            "wheel_radius",
+            ("axle_2_radius_error", 0.01, 0.15),
+        ),
+        (
+            {"axle_mu_factor": (0.6, 0.75, 0.9, 1.0)},
+            "adhesion_per_axle",
+            ("axle_4_factor", 1 / 0.6, 0.15),
+        ),
+    ],
+)
+def test_undeclared_effect_is_named(tmp_path, effect, category, check):
+    result = discover(read_trace(_trace(tmp_path, category, **effect)))
+    assert [s.category for s in result.added] == [category]
+    step = result.added[0]
+    key, value, rel = check
+    assert step.parameters[key] == pytest.approx(value, rel=rel)
+    if category != "adhesion_per_axle":  # the adhesion channel keeps a model floor (see notes)
+        assert step.after <= 0.5 * step.before
+
+
+def test_two_effects_at_once(tmp_path):
+    path = _trace(
+        tmp_path, "two", gradient_permille=-10.0, wheel_radius_error=(0.0, 0.0, 0.012, 0.0)
+    )
+    result = discover(read_trace(path))
+    assert {s.category for s in result.added} == {"gradient", "wheel_radius"}
+
+
+def test_calibrate_cli_writes_the_contract(tmp_path, capsys):
+    path = _trace(tmp_path, "cli", gradient_permille=-12.0)
+    out = tmp_path / "cal.json"
+    assert main(["calibrate", str(path), "--json", str(out)]) == 0
+    data = json.loads(out.read_text())
+    assert set(data["errors_before"]) == {
+        "train_speed_balance_kmh",
+        "adhesion_fit_kN",
+        "coasting_creep_pct",
+    }
+    effect = data["added_effects"][0]
+    assert set(effect) >= {"name", "category", "parameters", "channel", "before", "after"}
+    assert effect["category"] == "gradient" and effect["channel"] == "train_speed_balance_kmh"
+
+
+def test_calibrate_cli_malformed_trace_one_line(tmp_path, capsys):
+    (tmp_path / "x.csv").write_text("time_s,v_train_kmh\n0,1\n")
+    out = tmp_path / "cal.json"
+    assert main(["calibrate", str(tmp_path / "x.csv"), "--json", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "x.meta.json" in err and len(err.splitlines()) == 1 and not out.exists()

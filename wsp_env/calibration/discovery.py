@@ -1,0 +1,407 @@
+"""Effect discovery: which physical effect, missing from the nominal model, explains a residual.
+
+Each candidate effect extends the model of one equation-error channel (``residuals.py``) with
+a few parameters. For each candidate the parameters are fitted by least squares on that
+channel's samples and scored by the Bayesian information criterion
+``BIC = n ln(RSS / n) + k ln(n)``; the best candidate is added only if it lowers the BIC by
+more than ``MIN_DELTA_BIC`` *and* cuts the channel's RMSE by at least ``MIN_REDUCTION`` *and*
+the channel's RMSE stood above ``NOISE_FACTOR`` times its noise floor. Then the loop repeats
+on what is left, until nothing qualifies.
+
+Channels and their candidates (categories of DESIGN §8):
+
+* train-speed balance — ``gradient`` (constant force ``M g theta``), ``running_resistance``
+  (``dA + dC V^2``), ``pad_friction`` (brake force x ``(k0 + k1 (V - 100 km/h))``),
+  ``unmeasured_brake_force`` (a force following the brake demand), ``pressure_lag`` (the brake
+  force follows the logged pressure ``tau`` later), ``sensor`` (ground-speed scale error);
+* coasting creep — ``wheel_radius`` (one radius error per axle), ``sensor`` (one scale error for
+  the ground speed, seen by every axle alike);
+* adhesion fit — ``adhesion_per_axle`` (a friction factor per axle), ``load_transfer`` (bogie
+  pitch: leading axles +k a, trailing -k a).
+
+Regressors in the balance channel enter linearly: an extra retarding force ``dF(t) = -c phi(t)``
+changes the predicted speed by ``+c/M int phi dt``, so the least-squares coefficient ``c`` of the
+regressor ``1/M int phi dt`` gives the force as ``-c phi``.
+
+Choice: among qualifying candidates, those within ``TIE_GAIN`` of the largest RMSE reduction
+count as equally good, and the one with the fewest parameters wins — a constant force is a
+gradient before it is a running resistance with a spare term (logged samples are strongly
+correlated, so the BIC's penalty alone would let a spare parameter through).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from wsp_env.calibration.adhesion_estimate import eq9, estimate_adhesion
+from wsp_env.calibration.residuals import (
+    MIN_SPEED_KMH,
+    _cumtrapz,
+    brake_force_N,
+    channels,
+)
+from wsp_env.calibration.traces import Trace
+
+G = 9.80665
+MIN_DELTA_BIC = 10.0
+MIN_REDUCTION = 0.2
+NOISE_FACTOR = 2.0
+MAX_EFFECTS = 4
+TIE_GAIN = 0.02
+
+
+@dataclass
+class Candidate:
+    name: str
+    category: str
+    channel: str
+    n_params: int
+    fit: Callable[[Trace, np.ndarray, np.ndarray], tuple[dict[str, float], np.ndarray]]
+
+
+@dataclass
+class Step:
+    name: str
+    category: str
+    channel: str
+    parameters: dict[str, float]
+    before: float
+    after: float
+    delta_bic: float
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "name": self.name,
+            "category": self.category,
+            "parameters": self.parameters,
+            "channel": self.channel,
+            "before": self.before,
+            "after": self.after,
+            "delta_bic": self.delta_bic,
+        }
+
+
+@dataclass
+class Result:
+    errors_before: dict[str, float]
+    errors_after: dict[str, float]
+    added: list[Step] = field(default_factory=list)
+    considered: list[dict[str, Any]] = field(default_factory=list)
+
+
+# ---- linear fits on the balance channel ------------------------------------------------------
+
+
+def _linear(
+    residual: np.ndarray, mask: np.ndarray, regressors: list[np.ndarray]
+) -> tuple[np.ndarray, np.ndarray]:
+    X = np.stack([r[mask] for r in regressors], axis=1)
+    coef, *_ = np.linalg.lstsq(X, residual[mask], rcond=None)
+    return coef, residual - np.stack(regressors, axis=1) @ coef
+
+
+def _balance_regressor(trace: Trace, force: np.ndarray) -> np.ndarray:
+    """Change of the predicted speed (km/h) for an extra retarding force ``force`` (N)."""
+    return 3.6 * _cumtrapz(trace.time_s, force) / float(trace.vehicle["mass_kg"])
+
+
+def _fit_gradient(trace, residual, mask):
+    mass = float(trace.vehicle["mass_kg"])
+    reg = _balance_regressor(trace, np.full(len(trace.time_s), mass * G))
+    coef, res = _linear(residual, mask, [reg])
+    return {"gradient_permille": -1000.0 * coef[0]}, res
+
+
+def _fit_resistance(trace, residual, mask):
+    v = trace.v_train_kmh / 3.6
+    regs = [_balance_regressor(trace, np.ones_like(v)), _balance_regressor(trace, v * v)]
+    coef, res = _linear(residual, mask, regs)
+    return {"delta_a_N": -coef[0], "delta_c_N_per_mps2": -coef[1]}, res
+
+
+def _fit_pad_scale(trace, residual, mask):
+    brake = brake_force_N(trace).sum(axis=1)
+    coef, res = _linear(residual, mask, [_balance_regressor(trace, brake)])
+    return {"scale": 1.0 - coef[0]}, res
+
+
+def _fit_pad(trace, residual, mask):
+    brake = brake_force_N(trace).sum(axis=1)
+    dv = trace.v_train_kmh / 3.6 - 100.0 / 3.6
+    regs = [_balance_regressor(trace, brake), _balance_regressor(trace, brake * dv)]
+    coef, res = _linear(residual, mask, regs)
+    return {"scale": 1.0 - coef[0], "slope_per_mps": -coef[1]}, res
+
+
+def _demand_fraction(trace: Trace) -> np.ndarray:
+    p_max = float(trace.vehicle.get("brake", {}).get("p_max_bar", 0.0)) or float(
+        trace.p_cyl_bar.max()
+    )
+    if "p_demand_bar" in trace.optional:
+        return trace.optional["p_demand_bar"] / p_max
+    return trace.p_cyl_bar.max(axis=1) / p_max  # envelope of the cylinders: the demand shape
+
+
+def _fit_unmeasured(trace, residual, mask):
+    coef, res = _linear(residual, mask, [_balance_regressor(trace, _demand_fraction(trace))])
+    return {"force_at_full_demand_N": -coef[0]}, res
+
+
+def _fit_lag(trace, residual, mask):
+    """Grid over the lag; the brake force follows the logged pressure ``tau`` later."""
+    brake = brake_force_N(trace).sum(axis=1)
+    base = _balance_regressor(trace, brake)
+    t = trace.time_s
+    best = (math.inf, 0.0, residual)
+    for tau in np.arange(0.02, 0.61, 0.02):
+        lagged = np.interp(t - tau, t, brake, left=0.0)
+        # replacing the force by its lagged version changes the prediction by (lagged - brake)
+        reg = _balance_regressor(trace, lagged) - base
+        res = residual - reg  # no free gain: the lag alone
+        rss = float(np.sum(res[mask] ** 2))
+        if rss < best[0]:
+            best = (rss, float(tau), res)
+    return {"lag_s": best[1]}, best[2]
+
+
+def _fit_sensor_balance(trace, residual, mask):
+    """Ground speed logged as (1 + s) V: the predicted logged speed scales its change by 1 + s.
+
+    In the balance channel this looks like scaling every force; the coasting channel tells the
+    two apart (a speed scale error shows as the same apparent creep on every coasting axle), so
+    a scale that the coasting data contradicts is rejected (``None``).
+    """
+    v = trace.v_train_kmh
+    change = v[0] - (v - residual)  # nominal predicted speed drop (km/h)
+    coef, res = _linear(residual, mask, [change])
+    s = -coef[0]  # residual = -s * (true speed drop)
+    coasting = channels(trace)["coasting_creep_pct"]
+    if coasting.mask.any():
+        observed = coasting.residual[coasting.mask]
+        se = observed.std() / math.sqrt(observed.size) + 0.02
+        if abs(observed.mean() - 100.0 * s / (1.0 + s)) > 3.0 * se:
+            return None
+    return {"speed_scale_error": s}, res
+
+
+# ---- coasting creep ------------------------------------------------------------------------
+
+
+def _fit_radius(trace, residual, mask):
+    res = residual.copy()
+    params = {}
+    for i in range(residual.shape[1]):
+        m = mask[:, i]
+        offset = float(residual[m, i].mean()) if m.any() else 0.0
+        res[:, i] = residual[:, i] - offset
+        # apparent creep 100 (V - v/(1+e)) / V ~ 100 e / (1 + e)
+        params[f"axle_{i + 1}_radius_error"] = offset / (100.0 - offset)
+    return params, res
+
+
+def _fit_sensor_coasting(trace, residual, mask):
+    offset = float(residual[mask].mean()) if mask.any() else 0.0
+    return {"speed_scale_error": offset / 100.0}, residual - offset
+
+
+# ---- adhesion fit --------------------------------------------------------------------------
+
+
+def _adhesion_data(trace: Trace):
+    axles = estimate_adhesion(trace, min_speed_kmh=MIN_SPEED_KMH)
+    brake = brake_force_N(trace)
+    decel = -np.gradient(trace.v_train_kmh / 3.6, trace.time_s)
+    if "a_train_mps2" in trace.optional:
+        decel = trace.optional["a_train_mps2"]
+    rows = []
+    for i, a in enumerate(axles):
+        braked = brake[:, i] > 0.05 * max(brake.max(), 1e-9)
+        idx = a.critical[braked[a.critical]]
+        rows.append((i, idx, a))
+    return rows, decel
+
+
+def _fit_adhesion(trace, per_axle: bool, load_transfer: bool):
+    rows, decel = _adhesion_data(trace)
+    n_axles = trace.n_axles
+    # bogie pitch sign: first axle of each consecutive pair leads
+    lead = np.array([1.0 if i % 2 == 0 else -1.0 for i in range(n_axles)])
+    xi = np.concatenate([a.creepage[idx] for _, idx, a in rows])
+    dv = np.concatenate([a.sliding_kmh[idx] for _, idx, a in rows])
+    force = np.concatenate([a.force_N[idx] for _, idx, a in rows]) / 1e3
+    normal = np.concatenate([a.normal_N[idx] for _, idx, a in rows])
+    axle = np.concatenate([np.full(idx.size, i) for i, idx, _ in rows])
+    acc = np.concatenate([decel[idx] for _, idx, _ in rows])
+    if xi.size < 10:
+        return None
+
+    def model(p: np.ndarray) -> np.ndarray:
+        mu0, K, kr = p[:3]
+        j = 3
+        factor = np.ones(n_axles)
+        if per_axle:
+            factor[1:] = p[j : j + n_axles - 1]
+            j += n_axles - 1
+        n = normal.copy()
+        if load_transfer:
+            n = n + p[j] * 1e3 * lead[axle] * acc
+        return eq9(xi, dv, mu0, K, kr) * factor[axle] * n / 1e3
+
+    p0 = (
+        [0.1, 30.0, 0.02]
+        + ([1.0] * (n_axles - 1) if per_axle else [])
+        + ([0.0] if load_transfer else [])
+    )
+    lo = (
+        [0.005, 0.5, 0.0]
+        + ([0.3] * (n_axles - 1) if per_axle else [])
+        + ([-50.0] if load_transfer else [])
+    )
+    hi = (
+        [1.0, 1e4, 1.0]
+        + ([3.0] * (n_axles - 1) if per_axle else [])
+        + ([50.0] if load_transfer else [])
+    )
+    sol = least_squares(lambda p: model(p) - force, p0, bounds=(lo, hi))
+    return sol.x, sol.fun
+
+
+def adhesion_channel_rmse(trace: Trace, per_axle: bool = False, load_transfer: bool = False):
+    out = _fit_adhesion(trace, per_axle, load_transfer)
+    if out is None:
+        return float("nan"), None, 0
+    x, res = out
+    return float(np.sqrt(np.mean(res**2))), x, res.size
+
+
+CANDIDATES_BALANCE = [
+    Candidate("gradient", "gradient", "train_speed_balance_kmh", 1, _fit_gradient),
+    Candidate(
+        "running resistance", "running_resistance", "train_speed_balance_kmh", 2, _fit_resistance
+    ),
+    Candidate("pad friction", "pad_friction", "train_speed_balance_kmh", 1, _fit_pad_scale),
+    Candidate(
+        "speed-dependent pad friction", "pad_friction", "train_speed_balance_kmh", 2, _fit_pad
+    ),
+    Candidate(
+        "unmeasured brake force",
+        "unmeasured_brake_force",
+        "train_speed_balance_kmh",
+        1,
+        _fit_unmeasured,
+    ),
+    Candidate("pressure lag", "pressure_lag", "train_speed_balance_kmh", 1, _fit_lag),
+    Candidate("ground-speed scale", "sensor", "train_speed_balance_kmh", 1, _fit_sensor_balance),
+]
+CANDIDATES_COASTING = [
+    Candidate("wheel radius per axle", "wheel_radius", "coasting_creep_pct", 4, _fit_radius),
+    Candidate("ground-speed scale", "sensor", "coasting_creep_pct", 1, _fit_sensor_coasting),
+]
+
+
+def _noise_floor_kmh(trace: Trace) -> float:
+    """Speed-sensor noise from second differences of the logged train speed."""
+    d2 = np.diff(trace.v_train_kmh, 2)
+    return float(np.median(np.abs(d2)) / 0.6745 / math.sqrt(6.0))
+
+
+def _bic(rss: float, n: int, k: int) -> float:
+    return n * math.log(max(rss, 1e-300) / n) + k * math.log(n)
+
+
+def discover(trace: Trace) -> Result:
+    """Run the loop on one trace (see the module docstring)."""
+    chans = channels(trace)
+    before = {k: c.rmse for k, c in chans.items()}
+    result = Result(errors_before=before, errors_after=dict(before))
+    floors = {
+        "train_speed_balance_kmh": _noise_floor_kmh(trace),
+        "coasting_creep_pct": 100.0
+        * _noise_floor_kmh(trace)
+        / max(float(np.median(trace.v_train_kmh)), 1.0),
+    }
+    residual = {k: chans[k].residual.copy() for k in floors}
+    masks = {k: chans[k].mask for k in floors}
+    adhesion = {"per_axle": False, "load_transfer": False}
+    adh_rmse, _, _ = adhesion_channel_rmse(trace)
+    result.errors_before["adhesion_fit_kN"] = adh_rmse
+    result.errors_after["adhesion_fit_kN"] = adh_rmse
+    used: set[str] = set()
+    for _ in range(MAX_EFFECTS):
+        qualified: list[tuple] = []
+        for cands in (CANDIDATES_BALANCE, CANDIDATES_COASTING):
+            for cand in cands:
+                if cand.category + cand.channel in used:
+                    continue
+                ch = cand.channel
+                res, mask = residual[ch], masks[ch]
+                n = int(mask.sum())
+                if n < 10:
+                    continue
+                rss0 = float(np.sum(res[mask] ** 2))
+                rmse0 = math.sqrt(rss0 / n)
+                if rmse0 < NOISE_FACTOR * floors[ch]:
+                    continue
+                fitted = cand.fit(trace, res, mask)
+                if fitted is None:  # contradicted by another channel
+                    continue
+                params, new = fitted
+                rss1 = float(np.sum(new[mask] ** 2))
+                k = cand.n_params if cand.category != "wheel_radius" else trace.n_axles
+                dbic = _bic(rss1, n, k) - _bic(rss0, n, 0)
+                rmse1 = math.sqrt(rss1 / n)
+                row = {"name": cand.name, "category": cand.category, "channel": ch,
+                       "before": rmse0, "after": rmse1, "delta_bic": dbic}  # fmt: skip
+                result.considered.append(row)
+                gain = 1 - rmse1 / rmse0
+                if dbic < -MIN_DELTA_BIC and gain >= MIN_REDUCTION:
+                    qualified.append((gain, cand, params, new, rmse0, rmse1, dbic, k))
+        for key, cat in (("per_axle", "adhesion_per_axle"), ("load_transfer", "load_transfer")):
+            if adhesion[key] or math.isnan(adh_rmse):
+                continue
+            trial = dict(adhesion, **{key: True})
+            rmse1, x, n = adhesion_channel_rmse(trace, **trial)
+            k = (trace.n_axles - 1) if key == "per_axle" else 1
+            dbic = _bic(rmse1**2 * n, n, k) - _bic(adh_rmse**2 * n, n, 0)
+            gain = 1 - rmse1 / adh_rmse
+            row = {"name": cat, "category": cat, "channel": "adhesion_fit_kN",
+                   "before": adh_rmse, "after": rmse1, "delta_bic": dbic}  # fmt: skip
+            result.considered.append(row)
+            if dbic < -MIN_DELTA_BIC and gain >= MIN_REDUCTION:
+                params = {"mu0": x[0], "K": x[1], "K_rozv": x[2]}
+                if key == "per_axle":
+                    params.update(
+                        {
+                            f"axle_{i + 2}_factor": v
+                            for i, v in enumerate(x[3 : 3 + trace.n_axles - 1])
+                        }
+                    )
+                else:
+                    params["bogie_pitch_kN_per_mps2"] = x[-1]
+                qualified.append((gain, key, params, None, adh_rmse, rmse1, dbic, k))
+        if not qualified:
+            break
+        # the largest cut wins; cuts within TIE_GAIN of it are a tie, broken by fewer parameters
+        # (logged samples are correlated, so BIC alone over-rewards a spare parameter)
+        top = max(q[0] for q in qualified)
+        best = min((q for q in qualified if q[0] >= top - TIE_GAIN), key=lambda q: (q[7], -q[0]))
+        gain, cand, params, new, rmse0, rmse1, dbic, _ = best
+        if isinstance(cand, str):  # adhesion effect
+            adhesion[cand] = True
+            adh_rmse = rmse1
+            cat = "adhesion_per_axle" if cand == "per_axle" else "load_transfer"
+            step = Step(cat, cat, "adhesion_fit_kN", params, rmse0, rmse1, dbic)
+            result.errors_after["adhesion_fit_kN"] = rmse1
+        else:
+            residual[cand.channel] = new
+            used.add(cand.category + cand.channel)
+            step = Step(cand.name, cand.category, cand.channel, params, rmse0, rmse1, dbic)
+            result.errors_after[cand.channel] = rmse1
+        result.added.append(step)
+    return result
