@@ -45,6 +45,14 @@ def test_no_extra_effect_nothing_added(tmp_path, seed, speed):
             "adhesion_per_axle",
             ("axle_4_factor", 1 / 0.6, 0.15),
         ),
+        ({"resistance_scale": 3.0}, "running_resistance", ("delta_a_N", 1300.0, 0.25)),
+        (
+            {"extra_brake_force_N": 5000.0},
+            "unmeasured_brake_force",
+            ("force_at_full_demand_N", 5000.0, 0.05),
+        ),
+        ({"pressure_lag_s": 0.25}, "pressure_lag", ("lag_s", 0.25, 0.2)),
+        ({"speed_scale_error": 0.02}, "sensor", ("speed_scale_error", 0.02, 0.1)),
     ],
 )
 def test_undeclared_effect_is_named(tmp_path, effect, category, check):

@@ -131,7 +131,7 @@ class ScenarioConfig:
 OPTION_KEYS = (
     "speed_kmh", "rail", "mu_contaminated", "pattern", "load_factor", "pad_factor",
     "gradient_permille", "demand", "sections", "axle_mu_factor", "recovery_basis",
-    "background",
+    "background", "extra_brake_force_N",
 )  # fmt: skip
 
 

@@ -51,6 +51,8 @@ class CaseConfig:
         default=None, metadata={"choices": ("rail_metre", "wheel_metre", "sliding_power")}
     )
     axle_mu_factor: tuple[float, ...] | None = field(default=None, metadata={"gt": 0.0})
+    extra_brake_force_N: float | None = field(default=None, metadata={"ge": 0.0})
+    sections: tuple[tuple[float, ...], ...] | None = None
     criteria: dict[str, float] = field(default_factory=dict)
 
 
@@ -124,7 +126,7 @@ def expand(suite: SuiteConfig, max_speed_kmh: float) -> list[Run]:
             options: dict[str, Any] = {"rail": case.rail, "speed_kmh": speed, "demand": case.demand}
             for key in (
                 "mu_contaminated", "pattern", "load_factor", "gradient_permille",
-                "recovery_basis", "axle_mu_factor",
+                "recovery_basis", "axle_mu_factor", "extra_brake_force_N", "sections",
             ):  # fmt: skip
                 value = getattr(case, key)
                 if value is not None:

@@ -45,6 +45,7 @@ class RunSetup:
     axle_mu_factor: tuple[float, ...] | None = None  # R_i (seed 002 Fig. 8); None = all 1
     recovery_basis: str | None = None  # override the rail's recovery basis
     rail_name: str = ""  # for reports: the rail condition's name in the rail table
+    extra_brake_force_N: float = 0.0  # brake force not through the wheels, at full demand
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.speed_kmh) and self.speed_kmh > 0):
@@ -275,6 +276,7 @@ class TrainSim:
         if setup.sections:
             self.sections[env, : len(setup.sections)] = np.asarray(setup.sections, dtype=float)
         ep[L.EP_V_EPS] = self.v_eps_mps
+        ep[L.EP_EXTRA_BRAKE_N] = setup.extra_brake_force_N
 
         ap = self.axle_par[env]
         static = va.static_body_N * f + va.static_rest_N

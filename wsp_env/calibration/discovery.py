@@ -17,7 +17,8 @@ Channels and their candidates (categories of DESIGN §8):
 * coasting creep — ``wheel_radius`` (one radius error per axle), ``sensor`` (one scale error for
   the ground speed, seen by every axle alike);
 * adhesion fit — ``adhesion_per_axle`` (a friction factor per axle), ``load_transfer`` (bogie
-  pitch: leading axles +k a, trailing -k a).
+  pitch: leading axles +k a, trailing -k a), ``adhesion_position`` (a friction factor per
+  quarter of the stopping distance).
 
 Regressors in the balance channel enter linearly: an extra retarding force ``dF(t) = -c phi(t)``
 changes the predicted speed by ``+c/M int phi dt``, so the least-squares coefficient ``c`` of the
@@ -162,8 +163,8 @@ def _fit_lag(trace, residual, mask):
     for tau in np.arange(0.02, 0.61, 0.02):
         lagged = np.interp(t - tau, t, brake, left=0.0)
         # replacing the force by its lagged version changes the prediction by (lagged - brake)
-        reg = _balance_regressor(trace, lagged) - base
-        res = residual - reg  # no free gain: the lag alone
+        # a retarding force changed by (lagged - brake) raises the residual by its integral / M
+        res = residual + (_balance_regressor(trace, lagged) - base)  # no free gain: the lag alone
         rss = float(np.sum(res[mask] ** 2))
         if rss < best[0]:
             best = (rss, float(tau), res)
@@ -227,53 +228,60 @@ def _adhesion_data(trace: Trace):
     return rows, decel
 
 
-def _fit_adhesion(trace, per_axle: bool, load_transfer: bool):
+N_POSITION_SEGMENTS = 4
+
+
+def _fit_adhesion(trace, per_axle: bool, load_transfer: bool, position: bool = False):
+    """One Eq. 9 law for all axles (+ the chosen extensions), fitted to the critical points."""
     rows, decel = _adhesion_data(trace)
     n_axles = trace.n_axles
     # bogie pitch sign: first axle of each consecutive pair leads
     lead = np.array([1.0 if i % 2 == 0 else -1.0 for i in range(n_axles)])
+    x_m = _cumtrapz(trace.time_s, trace.v_train_kmh / 3.6)  # distance run
+    edges = np.linspace(0.0, x_m[-1], N_POSITION_SEGMENTS + 1)
     xi = np.concatenate([a.creepage[idx] for _, idx, a in rows])
     dv = np.concatenate([a.sliding_kmh[idx] for _, idx, a in rows])
     force = np.concatenate([a.force_N[idx] for _, idx, a in rows]) / 1e3
     normal = np.concatenate([a.normal_N[idx] for _, idx, a in rows])
     axle = np.concatenate([np.full(idx.size, i) for i, idx, _ in rows])
     acc = np.concatenate([decel[idx] for _, idx, _ in rows])
+    x_at = np.concatenate([x_m[idx] for _, idx, _ in rows])
+    seg = np.clip(np.searchsorted(edges, x_at) - 1, 0, N_POSITION_SEGMENTS - 1)
     if xi.size < 10:
         return None
+    n_ax, n_seg = n_axles - 1, N_POSITION_SEGMENTS - 1
 
     def model(p: np.ndarray) -> np.ndarray:
         mu0, K, kr = p[:3]
         j = 3
         factor = np.ones(n_axles)
         if per_axle:
-            factor[1:] = p[j : j + n_axles - 1]
-            j += n_axles - 1
+            factor[1:] = p[j : j + n_ax]
+            j += n_ax
         n = normal.copy()
         if load_transfer:
             n = n + p[j] * 1e3 * lead[axle] * acc
-        return eq9(xi, dv, mu0, K, kr) * factor[axle] * n / 1e3
+            j += 1
+        where = np.ones(N_POSITION_SEGMENTS)
+        if position:
+            where[1:] = p[j : j + n_seg]
+        return eq9(xi, dv, mu0, K, kr) * factor[axle] * where[seg] * n / 1e3
 
-    p0 = (
-        [0.1, 30.0, 0.02]
-        + ([1.0] * (n_axles - 1) if per_axle else [])
-        + ([0.0] if load_transfer else [])
-    )
-    lo = (
-        [0.005, 0.5, 0.0]
-        + ([0.3] * (n_axles - 1) if per_axle else [])
-        + ([-50.0] if load_transfer else [])
-    )
-    hi = (
-        [1.0, 1e4, 1.0]
-        + ([3.0] * (n_axles - 1) if per_axle else [])
-        + ([50.0] if load_transfer else [])
-    )
+    p0, lo, hi = [0.1, 30.0, 0.02], [0.005, 0.5, 0.0], [1.0, 1e4, 1.0]
+    if per_axle:
+        p0, lo, hi = p0 + [1.0] * n_ax, lo + [0.3] * n_ax, hi + [3.0] * n_ax
+    if load_transfer:
+        p0, lo, hi = [*p0, 0.0], [*lo, -50.0], [*hi, 50.0]
+    if position:
+        p0, lo, hi = p0 + [1.0] * n_seg, lo + [0.2] * n_seg, hi + [5.0] * n_seg
     sol = least_squares(lambda p: model(p) - force, p0, bounds=(lo, hi))
     return sol.x, sol.fun
 
 
-def adhesion_channel_rmse(trace: Trace, per_axle: bool = False, load_transfer: bool = False):
-    out = _fit_adhesion(trace, per_axle, load_transfer)
+def adhesion_channel_rmse(
+    trace: Trace, per_axle: bool = False, load_transfer: bool = False, position: bool = False
+):
+    out = _fit_adhesion(trace, per_axle, load_transfer, position)
     if out is None:
         return float("nan"), None, 0
     x, res = out
@@ -328,11 +336,12 @@ def discover(trace: Trace) -> Result:
     }
     residual = {k: chans[k].residual.copy() for k in floors}
     masks = {k: chans[k].mask for k in floors}
-    adhesion = {"per_axle": False, "load_transfer": False}
+    adhesion = {"per_axle": False, "load_transfer": False, "position": False}
     adh_rmse, _, _ = adhesion_channel_rmse(trace)
     result.errors_before["adhesion_fit_kN"] = adh_rmse
     result.errors_after["adhesion_fit_kN"] = adh_rmse
     used: set[str] = set()
+    x_total = float(_cumtrapz(trace.time_s, trace.v_train_kmh / 3.6)[-1])
     for _ in range(MAX_EFFECTS):
         qualified: list[tuple] = []
         for cands in (CANDIDATES_BALANCE, CANDIDATES_COASTING):
@@ -362,12 +371,16 @@ def discover(trace: Trace) -> Result:
                 gain = 1 - rmse1 / rmse0
                 if dbic < -MIN_DELTA_BIC and gain >= MIN_REDUCTION:
                     qualified.append((gain, cand, params, new, rmse0, rmse1, dbic, k))
-        for key, cat in (("per_axle", "adhesion_per_axle"), ("load_transfer", "load_transfer")):
+        adhesion_candidates = (
+            ("per_axle", "adhesion_per_axle", trace.n_axles - 1),
+            ("load_transfer", "load_transfer", 1),
+            ("position", "adhesion_position", N_POSITION_SEGMENTS - 1),
+        )
+        for key, cat, k in adhesion_candidates:
             if adhesion[key] or math.isnan(adh_rmse):
                 continue
             trial = dict(adhesion, **{key: True})
             rmse1, x, n = adhesion_channel_rmse(trace, **trial)
-            k = (trace.n_axles - 1) if key == "per_axle" else 1
             dbic = _bic(rmse1**2 * n, n, k) - _bic(adh_rmse**2 * n, n, 0)
             gain = 1 - rmse1 / adh_rmse
             row = {"name": cat, "category": cat, "channel": "adhesion_fit_kN",
@@ -375,15 +388,18 @@ def discover(trace: Trace) -> Result:
             result.considered.append(row)
             if dbic < -MIN_DELTA_BIC and gain >= MIN_REDUCTION:
                 params = {"mu0": x[0], "K": x[1], "K_rozv": x[2]}
+                extra = list(x[3:])
+                axle_f = extra[: trace.n_axles - 1] if trial["per_axle"] else []
+                rest = extra[len(axle_f) :]
+                pitch = rest[:1] if trial["load_transfer"] else []
+                segs = rest[len(pitch) :]
                 if key == "per_axle":
-                    params.update(
-                        {
-                            f"axle_{i + 2}_factor": v
-                            for i, v in enumerate(x[3 : 3 + trace.n_axles - 1])
-                        }
-                    )
+                    params.update({f"axle_{i + 2}_factor": v for i, v in enumerate(axle_f)})
+                elif key == "load_transfer":
+                    params["bogie_pitch_kN_per_mps2"] = pitch[0]
                 else:
-                    params["bogie_pitch_kN_per_mps2"] = x[-1]
+                    params.update({f"segment_{i + 2}_factor": v for i, v in enumerate(segs)})
+                    params["segment_length_m"] = x_total / N_POSITION_SEGMENTS
                 qualified.append((gain, key, params, None, adh_rmse, rmse1, dbic, k))
         if not qualified:
             break
@@ -395,7 +411,8 @@ def discover(trace: Trace) -> Result:
         if isinstance(cand, str):  # adhesion effect
             adhesion[cand] = True
             adh_rmse = rmse1
-            cat = "adhesion_per_axle" if cand == "per_axle" else "load_transfer"
+            cat = {"per_axle": "adhesion_per_axle", "load_transfer": "load_transfer",
+                   "position": "adhesion_position"}[cand]  # fmt: skip
             step = Step(cat, cat, "adhesion_fit_kN", params, rmse0, rmse1, dbic)
             result.errors_after["adhesion_fit_kN"] = rmse1
         else:
@@ -403,5 +420,15 @@ def discover(trace: Trace) -> Result:
             used.add(cand.category + cand.channel)
             step = Step(cand.name, cand.category, cand.channel, params, rmse0, rmse1, dbic)
             result.errors_after[cand.channel] = rmse1
+            if cand.category == "sensor" and cand.channel == "coasting_creep_pct":
+                # the same scale error acts on the balance channel: correct it there too
+                ch = "train_speed_balance_kmh"
+                s = params["speed_scale_error"]
+                v = trace.v_train_kmh
+                drop = v[0] - (v - residual[ch])
+                residual[ch] = residual[ch] + s * drop
+                used.add("sensor" + ch)
+                m = masks[ch]
+                result.errors_after[ch] = float(np.sqrt(np.mean(residual[ch][m] ** 2)))
         result.added.append(step)
     return result

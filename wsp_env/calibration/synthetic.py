@@ -34,6 +34,10 @@ def simulate_trace(
     wheel_radius_error: tuple[float, ...] | None = None,
     pad_factor: float = 1.0,
     coast_s: float = 3.0,
+    resistance_scale: float = 1.0,
+    height_scale: float = 1.0,
+    pressure_lag_s: float = 0.0,
+    speed_scale_error: float = 0.0,
     **case: Any,
 ) -> tuple[Path, Path, dict[str, Any]]:
     """Simulate, sample and write ``STEM.csv`` + ``STEM.meta.json``; return paths and metrics.
@@ -43,6 +47,9 @@ def simulate_trace(
     ``wheel_radius_error``: per axle, the true radius's relative excess over the nominal one
     (applied to the logged axle speeds, which the logger computes with the nominal radius).
     ``pad_factor``: true / nominal pad friction. ``coast_s``: coasting before the demand rises.
+    ``resistance_scale``: true / nominal running resistance. ``height_scale``: true / nominal
+    CoG and pivot heights (load transfer). ``pressure_lag_s``: the brake force lags the logged
+    pressure. ``speed_scale_error``: the ground-speed sensor's scale error.
     """
     suite = SuiteConfig(
         name="synthetic",
@@ -50,10 +57,30 @@ def simulate_trace(
         seeds=(seed,),
         cases=(CaseConfig(name="trace", rail="_synthetic", speeds_kmh=(str(speed_kmh),), **case),),
     )
-    veh = load_vehicle(vehicle)
+    nominal = load_vehicle(vehicle)  # what the metadata declares
+    veh = nominal
     # a coasting lead-in before the brake acts, as test logs have (coasting-creep channel)
+    res = veh.resistance
     veh = dataclasses.replace(
-        veh, brake=dataclasses.replace(veh.brake, demand_delay_s=veh.brake.demand_delay_s + coast_s)
+        veh,
+        brake=dataclasses.replace(veh.brake, demand_delay_s=veh.brake.demand_delay_s + coast_s),
+        resistance=dataclasses.replace(
+            res,
+            a_N=res.a_N * resistance_scale,
+            b_N_per_mps=res.b_N_per_mps * resistance_scale,
+            c_N_per_mps2=res.c_N_per_mps2 * resistance_scale,
+        ),
+        cars=tuple(
+            dataclasses.replace(c, cog_height_m=c.cog_height_m * height_scale) for c in veh.cars
+        ),
+        bogies=tuple(
+            dataclasses.replace(
+                b,
+                pivot_height_m=b.pivot_height_m * height_scale,
+                frame_cog_height_m=b.frame_cog_height_m * height_scale,
+            )
+            for b in veh.bogies
+        ),
     )
     # nominal everything except what the caller injects: no random load, pad or gradient
     scenario = {"load_factor": [1.0, 1.0], "pad_factor": [pad_factor, pad_factor],
@@ -63,13 +90,21 @@ def simulate_trace(
         veh, suite, make_policy(policy), record="all", env_kwargs=env_kwargs
     )
     record = next(iter(records.values()))
+    t = record.time_s
+    if pressure_lag_s:  # the brake force follows the logged pressure pressure_lag_s later
+        lead = np.stack([np.interp(t + pressure_lag_s, t, p) for p in record.p_cyl_bar.T], axis=1)
+        record = dataclasses.replace(record, p_cyl_bar=lead)
+    if speed_scale_error:  # ground-speed sensor reads (1 + error) times the true speed
+        record = dataclasses.replace(
+            record, v_train_kmh=record.v_train_kmh * (1 + speed_scale_error)
+        )
     columns = sample_run(record, sensors or SensorModel(), np.random.default_rng([seed, 7]))
     if wheel_radius_error is not None:
         # a wheel larger than nominal by e turns slower: the logger's omega * r_nominal reads low
         for i, err in enumerate(wheel_radius_error, start=1):
             columns[f"v_axle_{i}_kmh"] = columns[f"v_axle_{i}_kmh"] / (1.0 + err)
     meta = trace_metadata(
-        veh, RunSetup(speed_kmh, rail), contaminant, (sensors or SensorModel()).sample_period_s,
+        nominal, RunSetup(speed_kmh, rail), contaminant, (sensors or SensorModel()).sample_period_s,
         f"synthetic {vehicle} {speed_kmh:g} km/h seed {seed}",
     )  # fmt: skip
     csv_path, meta_path = write_trace(stem, columns, meta)

@@ -13,7 +13,8 @@ Equations (per environment ``e``, axle ``k``, substep ``dt``):
   slope, which makes the problem stiff (time constant < 1 ms at low speed), is then
   unconditionally stable, while the physically unstable falling branch stays explicit.
   The brake is a friction element: it can hold a stopped wheel, never turn it backwards;
-* train   ``M dV/dt = -sum F - (A + B V + C V^2) - M g sin(gradient)``, explicit (M >> J/r^2),
+* train   ``M dV/dt = -sum F - (A + B V + C V^2) - M g sin(gradient) - F_extra p_d/p_max``
+  (``F_extra``: a brake force not through the wheels, e.g. a track brake), explicit (M >> J/r^2),
   with the *same* linearised forces as the wheels, so the discrete energy balance
   (kinetic energy = brake + sliding + resistance work) holds to round-off;
 * load    ``N_k = N_static,k + k_transfer,k * decel`` (quasi-static load transfer);
@@ -78,6 +79,7 @@ from wsp_env.physics.layout import (
     AS_STIFF,
     AS_TORQUE,
     AS_VENTING,
+    EA_EXTRA_E,
     EA_GRADE_E,
     EA_RESIST_E,
     EP_C_BACKGROUND,
@@ -88,6 +90,7 @@ from wsp_env.physics.layout import (
     EP_DEMAND_DELAY,
     EP_DEMAND_RISE,
     EP_E_CLEAN,
+    EP_EXTRA_BRAKE_N,
     EP_FILL_DECAY,
     EP_FILL_RATE,
     EP_GRADE_ACC,
@@ -254,7 +257,8 @@ def _step_env(
             frac = (t - t_delay) / t_rise
         else:
             frac = 1.0 if t >= t_delay else 0.0
-        p_d = p_max * min(1.0, max(0.0, frac))
+        frac = min(1.0, max(0.0, frac))
+        p_d = p_max * frac
         decel = env_state[e, ES_DECEL]
         # creep is evaluated at the predicted end-of-substep train speed, so that the wheel
         # update (implicit in omega) tracks the speed the train will have, not the one it had:
@@ -361,7 +365,8 @@ def _step_env(
             resist = env_par[e, EP_DAVIS_A] + v * (
                 env_par[e, EP_DAVIS_B] + v * env_par[e, EP_DAVIS_C]
             )
-        v_new = v - dt * (force_sum + resist + grade) / mass
+        extra = env_par[e, EP_EXTRA_BRAKE_N] * frac if v > 0.0 else 0.0
+        v_new = v - dt * (force_sum + resist + grade + extra) / mass
         h = dt
         stopped = v_new <= 0.0
         if stopped:
@@ -375,6 +380,7 @@ def _step_env(
         env_state[e, ES_T] = t + h
         env_acc[e, EA_RESIST_E] += resist * v_mid * h
         env_acc[e, EA_GRADE_E] += grade * v_mid * h
+        env_acc[e, EA_EXTRA_E] += extra * v_mid * h
         # --- work, sliding statistics and rail cleaning ----------------------------------------
         for k in range(n_axles):
             r = axle_par[e, k, AP_RADIUS]

@@ -54,7 +54,8 @@ EP_INJ_LEVEL = 36  # level laid at the leading axle while injecting (seed 000 so
 EP_INJ_UNTIL = 37  # s, injection stops at this time (-1: no injection)
 EP_N_SECTIONS = 38  # number of used rows of ``sections``
 EP_V_EPS = 39  # m/s, creepage regularisation speed
-N_EP = 40
+EP_EXTRA_BRAKE_N = 40  # N at full demand: a brake force not through the wheels (track brake, ...)
+N_EP = 41
 
 # ---- per-axle parameters ---------------------------------------------------------------------
 AP_RADIUS = 0  # m, rolling radius
@@ -106,7 +107,8 @@ NO_CELL = -1.0e18  # AS_CELL before the first substep
 # ---- accumulators ----------------------------------------------------------------------------
 EA_RESIST_E = 0  # J, running-resistance work
 EA_GRADE_E = 1  # J, work against gravity (potential energy gained)
-N_EA = 2
+EA_EXTRA_E = 2  # J, work of the extra (non-wheel) brake force
+N_EA = 3
 
 AA_SLIDE_INT = 0  # m, integral of (V - omega r) dt            (seed 002 Eq. 23)
 AA_SLIDE_SQ_INT = 1  # m^2/s, integral of (V - omega r)^2 dt    (seed 002 Eq. 24)

@@ -1,0 +1,52 @@
+"""Keep numba's on-disk cache consistent across the package's kernel modules.
+
+numba's ``cache=True`` keys each cached function on its *own* source file only. Our kernels
+call each other across files (the environment step inlines the physics step, which inlines the
+creep laws), so editing ``adhesion.py`` would leave a stale compiled ``integrator`` or
+``env_kernel`` in the cache — silently running old physics. Before any kernel module is
+imported, this hashes every kernel source file and, when the hash differs from the one recorded
+next to the cache, deletes the package's cached kernels so that they recompile.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+from pathlib import Path
+
+PACKAGE = Path(__file__).resolve().parent
+KERNEL_SOURCES = (
+    "physics/layout.py",
+    "physics/adhesion.py",
+    "physics/integrator.py",
+    "env_kernel.py",
+    "reference.py",
+)
+STAMP_NAME = "wsp_env_kernels.sha256"
+
+
+def _digest() -> str:
+    h = hashlib.sha256()
+    for rel in KERNEL_SOURCES:
+        path = PACKAGE / rel
+        h.update(rel.encode())
+        if path.exists():
+            h.update(path.read_bytes())
+    return h.hexdigest()
+
+
+def refresh() -> None:
+    """Drop cached kernels compiled from other versions of the kernel sources."""
+    digest = _digest()
+    stamp = PACKAGE / "__pycache__" / STAMP_NAME
+    with contextlib.suppress(OSError):
+        if stamp.exists() and stamp.read_text() == digest:
+            return
+    roots = [PACKAGE, PACKAGE.parent / "baselines"]
+    for root in roots:
+        for cached in (*root.rglob("*.nbi"), *root.rglob("*.nbc")):
+            with contextlib.suppress(OSError):
+                cached.unlink()
+    with contextlib.suppress(OSError):
+        stamp.parent.mkdir(exist_ok=True)
+        stamp.write_text(digest)
