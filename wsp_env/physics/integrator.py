@@ -350,6 +350,16 @@ def _step_env(
                 )
                 d_omega = omega_new - omega
                 force_used = kappa * (v_c - omega_new * r)
+            # The linearised force may ask more of the rail than it can give (a step toward zero
+            # creepage, a steep slope at low speed): then the wheel stays on the saturated force
+            # and moves only as far as that force takes it — never past the friction limit.
+            cap = max(level, mu_rec) * normal
+            if abs(force_used) > cap:
+                force_used = cap if force_used > 0.0 else -cap
+                d_omega = dt * (force_used * r - torque) / inertia
+                if (v_c - (omega + d_omega) * r) * dv < 0.0:  # it would pass zero creepage
+                    d_omega = v_c / r - omega
+                    force_used = (inertia * d_omega / dt + torque) / r
             if omega + d_omega < 0.0:
                 d_omega = -omega  # the brake holds the wheel; it never turns it backwards
             axle_state[e, k, AS_OMEGA] = omega + d_omega
