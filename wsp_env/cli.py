@@ -28,8 +28,19 @@ def write_json(path: str | Path, payload: dict[str, Any]) -> Path:
     """Write ``payload`` as JSON through a temp file (never half-written)."""
     target = Path(path)
     target.parent.mkdir(parents=True, exist_ok=True)
-    text = json.dumps(payload, indent=2, allow_nan=False, default=_json_default) + "\n"
+    text = json.dumps(_finite(payload), indent=2, allow_nan=False, default=_json_default) + "\n"
     return write_atomically(target, lambda fh: fh.write(text))
+
+
+def _finite(obj: Any) -> Any:
+    """NaN and infinities become null (JSON has no NaN; a reader must not meet a bare NaN)."""
+    if isinstance(obj, float | np.floating):
+        return float(obj) if np.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: _finite(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_finite(v) for v in obj]
+    return obj
 
 
 def _json_default(obj: Any) -> Any:

@@ -44,8 +44,11 @@ from wsp_env.calibration.adhesion_estimate import eq9, estimate_adhesion
 from wsp_env.calibration.residuals import (
     MIN_SPEED_KMH,
     _cumtrapz,
+    balance_intervals,
     brake_force_N,
     channels,
+    masked_cumdiff,
+    masked_cumtrapz,
 )
 from wsp_env.calibration.traces import Trace
 
@@ -109,7 +112,8 @@ def _linear(
 
 def _balance_regressor(trace: Trace, force: np.ndarray) -> np.ndarray:
     """Change of the predicted speed (km/h) for an extra retarding force ``force`` (N)."""
-    return 3.6 * _cumtrapz(trace.time_s, force) / float(trace.vehicle["mass_kg"])
+    valid = balance_intervals(trace)
+    return 3.6 * masked_cumtrapz(trace.time_s, force, valid) / float(trace.vehicle["mass_kg"])
 
 
 def _fit_gradient(trace, residual, mask):
@@ -178,10 +182,10 @@ def _fit_sensor_balance(trace, residual, mask):
     two apart (a speed scale error shows as the same apparent creep on every coasting axle), so
     a scale that the coasting data contradicts is rejected (``None``).
     """
-    v = trace.v_train_kmh
-    change = v[0] - (v - residual)  # nominal predicted speed drop (km/h)
-    coef, res = _linear(residual, mask, [change])
-    s = -coef[0]  # residual = -s * (true speed drop)
+    # residual = predicted - measured drop = drop - (1 + s) drop = -s x (true speed drop)
+    drop = -masked_cumdiff(trace.v_train_kmh, balance_intervals(trace))
+    coef, res = _linear(residual, mask, [drop])
+    s = -coef[0]
     coasting = channels(trace)["coasting_creep_pct"]
     if coasting.mask.any():
         observed = coasting.residual[coasting.mask]
@@ -275,6 +279,10 @@ def _fit_adhesion(trace, per_axle: bool, load_transfer: bool, position: bool = F
     if position:
         p0, lo, hi = p0 + [1.0] * n_seg, lo + [0.2] * n_seg, hi + [5.0] * n_seg
     sol = least_squares(lambda p: model(p) - force, p0, bounds=(lo, hi))
+    span = np.asarray(hi) - np.asarray(lo)
+    at_bound = (np.abs(sol.x - lo) < 1e-4 * span) | (np.abs(sol.x - hi) < 1e-4 * span)
+    if (per_axle or load_transfer or position) and at_bound[3:].any():
+        return None  # an extension whose fit runs to a bound is not identified by these data
     return sol.x, sol.fun
 
 
@@ -328,8 +336,9 @@ def discover(trace: Trace) -> Result:
     chans = channels(trace)
     before = {k: c.rmse for k, c in chans.items()}
     result = Result(errors_before=before, errors_after=dict(before))
+    sampling = chans["train_speed_balance_kmh"].detail.get("sampling_rmse", 0.0)
     floors = {
-        "train_speed_balance_kmh": _noise_floor_kmh(trace),
+        "train_speed_balance_kmh": math.hypot(_noise_floor_kmh(trace), sampling),
         "coasting_creep_pct": 100.0
         * _noise_floor_kmh(trace)
         / max(float(np.median(trace.v_train_kmh)), 1.0),
@@ -381,6 +390,8 @@ def discover(trace: Trace) -> Result:
                 continue
             trial = dict(adhesion, **{key: True})
             rmse1, x, n = adhesion_channel_rmse(trace, **trial)
+            if x is None:  # not identified (a parameter ran to its bound)
+                continue
             dbic = _bic(rmse1**2 * n, n, k) - _bic(adh_rmse**2 * n, n, 0)
             gain = 1 - rmse1 / adh_rmse
             row = {"name": cat, "category": cat, "channel": "adhesion_fit_kN",
@@ -424,8 +435,7 @@ def discover(trace: Trace) -> Result:
                 # the same scale error acts on the balance channel: correct it there too
                 ch = "train_speed_balance_kmh"
                 s = params["speed_scale_error"]
-                v = trace.v_train_kmh
-                drop = v[0] - (v - residual[ch])
+                drop = -masked_cumdiff(trace.v_train_kmh, balance_intervals(trace))
                 residual[ch] = residual[ch] + s * drop
                 used.add("sensor" + ch)
                 m = masks[ch]

@@ -8,8 +8,10 @@ model on measured quantities and tests one equation:
   wheel speeds alone, through the brake and wheelset equations —
   ``V(t) = V(0) - 1/M [ int (sum_i T_i / r + R(V)) dt + sum_i J (v_i(t) - v_i(0)) / r^2 ]`` with
   ``T_i = gain (p_i - p_th)^+`` and ``R`` the nominal resistance (metadata ``resistance``, else
-  none) — against the measured train speed. Sees gradient, resistance, pad friction, unmeasured
-  brake forces, pressure lag, ground-speed sensor errors. Its floor is about the sensor noise.
+  none) — against the measured train speed, over the intervals where every wheel turns (a
+  locked wheel's brake force is not known from its pressure). Sees gradient, resistance, pad
+  friction, unmeasured brake forces, pressure lag, ground-speed sensor errors. Its floor is
+  about the sensor noise.
 * **adhesion fit** (kN): the adhesion force from the wheelset equation (``adhesion_estimate``)
   against the force of one Eq. 9 law, fitted to all axles, at each braked sample's measured
   creepage. Sees position-dependent adhesion, load transfer, per-axle differences (cleaning).
@@ -27,6 +29,7 @@ from wsp_env.calibration.adhesion_estimate import eq9, estimate_adhesion, fit_po
 from wsp_env.calibration.traces import Trace
 
 MIN_SPEED_KMH = 10.0
+LOCK_KMH = 1.0  # a wheel slower than this is locked
 COAST_MIN_S = 2.0
 
 
@@ -61,6 +64,28 @@ def resistance_N(trace: Trace, v_mps: np.ndarray) -> np.ndarray:
     return a + v_mps * (b + v_mps * c)
 
 
+def balance_intervals(trace: Trace) -> np.ndarray:
+    """Sample intervals on which the balance holds: every wheel turning at both ends.
+
+    A locked wheel's brake torque is static friction, not ``gain (p - p_th)``: its force is
+    unknown from the brake equation, so lock episodes are left out of the balance (and the
+    prediction carries on from the measured speed after them).
+    """
+    turning = (trace.v_axle_kmh > LOCK_KMH).all(axis=1) | (trace.v_train_kmh < LOCK_KMH)
+    return turning[1:] & turning[:-1]
+
+
+def masked_cumtrapz(t: np.ndarray, y: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """Running integral of ``y`` over the valid intervals only."""
+    inc = 0.5 * (y[1:] + y[:-1]) * np.diff(t) * valid
+    return np.concatenate([[0.0], np.cumsum(inc)])
+
+
+def masked_cumdiff(y: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """Running sum of the increments of ``y`` over the valid intervals only."""
+    return np.concatenate([[0.0], np.cumsum(np.diff(y) * valid)])
+
+
 def train_speed_balance(trace: Trace) -> Channel:
     veh = trace.vehicle
     mass = float(veh["mass_kg"])
@@ -69,14 +94,21 @@ def train_speed_balance(trace: Trace) -> Channel:
     t = trace.time_s
     v = trace.v_train_kmh / 3.6
     wheels = trace.v_axle_kmh / 3.6
+    valid = balance_intervals(trace)
     force = brake_force_N(trace).sum(axis=1) + resistance_N(trace, v)
-    spin = inertia * (wheels - wheels[0]).sum(axis=1) / r**2
-    predicted = v[0] - (_cumtrapz(t, force) + spin) / mass
-    mask = trace.v_train_kmh > MIN_SPEED_KMH
-    residual = 3.6 * (v - predicted)
-    return Channel(
-        "train_speed_balance", "kmh", residual, mask, float(np.sqrt(np.mean(residual[mask] ** 2)))
-    )
+    spin = inertia * masked_cumdiff(wheels.sum(axis=1), valid) / r**2
+    predicted_drop = (masked_cumtrapz(t, force, valid) + spin) / mass
+    measured_drop = -masked_cumdiff(v, valid)
+    residual = 3.6 * (predicted_drop - measured_drop)
+    mask = (trace.v_train_kmh > MIN_SPEED_KMH) & np.concatenate([[True], valid])
+    rmse = float(np.sqrt(np.mean(residual[mask] ** 2))) if mask.any() else float("nan")
+    # sampling uncertainty of the force integral: per interval, half the gap between the left
+    # and right Riemann sums (a 10 Hz log of a valve venting at 10 bar/s is far from smooth),
+    # accumulated as independent errors
+    gap = 0.5 * np.abs(np.diff(force)) * np.diff(t) * valid
+    sampling = 3.6 * np.sqrt(np.concatenate([[0.0], np.cumsum(gap**2)])) / mass
+    detail = {"sampling_rmse": float(np.sqrt(np.mean(sampling[mask] ** 2))) if mask.any() else 0.0}
+    return Channel("train_speed_balance", "kmh", residual, mask, rmse, detail)
 
 
 def adhesion_fit(trace: Trace) -> Channel:

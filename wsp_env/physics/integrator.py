@@ -357,9 +357,12 @@ def _step_env(
             if abs(force_used) > cap:
                 force_used = cap if force_used > 0.0 else -cap
                 d_omega = dt * (force_used * r - torque) / inertia
-                if (v_c - (omega + d_omega) * r) * dv < 0.0:  # it would pass zero creepage
-                    d_omega = v_c / r - omega
-                    force_used = (inertia * d_omega / dt + torque) / r
+                if (v_c - (omega + d_omega) * r) * dv < 0.0:  # it would pass zero creepage:
+                    # the force that stops it there, if the rail can give it; else the wheel
+                    # goes on through zero creepage on the saturated force of the other sign
+                    needed = (inertia * (v_c / r - omega) / dt + torque) / r
+                    force_used = min(cap, max(-cap, needed))
+                    d_omega = dt * (force_used * r - torque) / inertia
             if omega + d_omega < 0.0:
                 d_omega = -omega  # the brake holds the wheel; it never turns it backwards
             axle_state[e, k, AS_OMEGA] = omega + d_omega
