@@ -94,3 +94,26 @@ def test_calibrate_cli_malformed_trace_one_line(tmp_path, capsys):
     assert main(["calibrate", str(tmp_path / "x.csv"), "--json", str(out)]) == 2
     err = capsys.readouterr().err.strip()
     assert "x.meta.json" in err and len(err.splitlines()) == 1 and not out.exists()
+
+
+def test_calibrate_report_and_export_load_in_the_env(tmp_path):
+    """--export writes a rail table + reset options that gymnasium.make / reset accept."""
+    import gymnasium as gym
+    import yaml
+
+    import wsp_env  # noqa: F401
+
+    path = _trace(tmp_path, "exp", gradient_permille=-10.0, axle_mu_factor=(0.6, 0.75, 0.9, 1.0))
+    rails, report = tmp_path / "calibrated.yaml", tmp_path / "report"
+    assert main(["calibrate", str(path), "--export", str(rails), "--report", str(report)]) == 0
+    options = yaml.safe_load((tmp_path / "calibrated.yaml.options.yaml").read_text())
+    assert options["gradient_permille"] == pytest.approx(-10.0, abs=1.0)
+    assert options["axle_mu_factor"][0] == pytest.approx(0.6, abs=0.1)
+    env = gym.make(
+        "WSPBraking-v0", rails_config=str(rails), scenario={"rails": {"calibrated": 1.0}}
+    )
+    _, info = env.reset(seed=0, options={"rail": "calibrated", "speed_kmh": 120.0, **options})
+    assert info["scenario"]["rail"] == "calibrated"
+    assert 0.03 < info["scenario"]["mu_contaminated"] < 0.2
+    text = (report / "report.md").read_text()
+    assert "gradient" in text and (report / "adhesion_curves.png").exists()

@@ -280,6 +280,10 @@ def _add_calibrate(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("trace", help="the trace CSV (metadata found next to it)")
     p.add_argument("--json", dest="json_path", default=None, help="write the result here")
+    p.add_argument("--report", default=None, help="write report.md and plots into this folder")
+    p.add_argument(
+        "--export", default=None, help="write a rail table (+ .options.yaml) the env loads"
+    )
     p.set_defaults(func=cmd_calibrate)
 
 
@@ -292,14 +296,22 @@ def cmd_calibrate(args: argparse.Namespace) -> dict[str, Any]:
     except TraceError as err:
         raise UserError(str(err)) from None
     result = discover(trace)
-    return {
+    payload = {
         "trace": str(args.trace),
         "errors_before": result.errors_before,
         "errors_after": result.errors_after,
         "added_effects": [s.as_dict() for s in result.added],
         "candidates": result.considered,
         "notes": trace.notes,
+        "outputs": [],
     }
+    from wsp_env.calibration.export import export_config, write_report
+
+    if args.export:
+        payload["outputs"].extend(str(p) for p in export_config(args.export, trace, result))
+    if args.report:
+        payload["outputs"].append(str(write_report(args.report, trace, result)))
+    return payload
 
 
 def _print_calibrate(result: dict[str, Any]) -> None:
@@ -312,6 +324,8 @@ def _print_calibrate(result: dict[str, Any]) -> None:
         params = ", ".join(f"{k} {v:.4g}" for k, v in e["parameters"].items())
         change = f"{e['before']:.3f} -> {e['after']:.3f}"
         print(f"  added {e['category']} on {e['channel']}: {change} ({params})")
+    for p in result["outputs"]:
+        print(f"  wrote {p}")
 
 
 # ---- bench ----------------------------------------------------------------------------------
