@@ -117,3 +117,65 @@ def test_calibrate_report_and_export_load_in_the_env(tmp_path):
     assert 0.03 < info["scenario"]["mu_contaminated"] < 0.2
     text = (report / "report.md").read_text()
     assert "gradient" in text and (report / "adhesion_curves.png").exists()
+
+
+def _to_vendor_names(path):
+    """Rewrite a trace with the BCU's channel names and units (TRACE_FORMAT.md)."""
+    import csv
+
+    with path.open() as fh:
+        rows = list(csv.reader(fh))
+    header, body = rows[0], rows[1:]
+    renamed = []
+    for h in header:
+        if h == "v_train_kmh":
+            renamed.append("vtrain")
+        elif h.startswith("v_axle_"):
+            renamed.append(f"vites_fc_ax{h.split('_')[2]}")
+        elif h.startswith("p_cyl_"):
+            renamed.append(f"p_cyl{h.split('_')[2]}")
+        elif h == "a_train_mps2":
+            renamed.append("dec_train")
+        else:
+            renamed.append(h)
+    j = header.index("v_train_kmh")
+    for r in body:
+        r[j] = f"{float(r[j]) / 3.6:.6f}"  # vtrain is logged in m/s
+    out = path.with_name("vendor_" + path.name)
+    with out.open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(renamed)
+        w.writerows(body)
+    meta = path.with_name(path.name.replace(".csv", ".meta.json"))
+    out.with_name(out.name.replace(".csv", ".meta.json")).write_text(meta.read_text())
+    return out
+
+
+@pytest.mark.parametrize(
+    "variant",
+    ["noisy", "jitter_bcu_rate", "vendor_names", "other_wsp", "barely_visible", "large"],
+)
+def test_loop_holds_beyond_its_own_generator(tmp_path, variant):
+    """Other noise, sampling, channel names, WSP logic and effect sizes than developed on."""
+    sensors, grade = SENSORS, -12.0
+    if variant == "noisy":
+        sensors = SensorModel(sample_period_s=0.1, speed_noise_kmh=0.4, pressure_noise_bar=0.03)
+    elif variant == "jitter_bcu_rate":
+        sensors = SensorModel(sample_period_s=0.02, jitter_s=0.004, speed_noise_kmh=0.1)
+    elif variant == "barely_visible":
+        grade = -3.0
+    elif variant == "large":
+        grade = -35.0
+    kwargs = {}
+    if variant == "other_wsp":  # the seed 002 thresholds: a much more tolerant WSP
+        from wsp_env.config import _configs_root
+
+        kwargs["wsp_config"] = str(_configs_root() / "wsp" / "seed002_uic_z1.yaml")
+    clean = _trace(tmp_path, "clean", seed=3, sensors=sensors, **kwargs)
+    sloped = _trace(tmp_path, "sloped", seed=3, sensors=sensors, gradient_permille=grade, **kwargs)
+    if variant == "vendor_names":
+        clean, sloped = _to_vendor_names(clean), _to_vendor_names(sloped)
+    assert discover(read_trace(clean)).added == []
+    added = discover(read_trace(sloped)).added
+    assert [s.category for s in added] == ["gradient"]
+    assert added[0].parameters["gradient_permille"] == pytest.approx(grade, rel=0.15, abs=0.5)

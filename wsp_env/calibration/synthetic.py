@@ -28,6 +28,7 @@ def simulate_trace(
     speed_kmh: float,
     vehicle: str = "uic_z1",
     policy: str = "classical",
+    wsp_config: str | None = None,
     sensors: SensorModel | None = None,
     seed: int = 0,
     contaminant: str = "unknown",
@@ -87,7 +88,7 @@ def simulate_trace(
                 "gradient_permille": [0.0, 0.0]}  # fmt: skip
     env_kwargs = {"extra_rails": {"_synthetic": rail}, "scenario": scenario}
     results, records = run_suite(
-        veh, suite, make_policy(policy), record="all", env_kwargs=env_kwargs
+        veh, suite, make_policy(policy, wsp_config), record="all", env_kwargs=env_kwargs
     )
     record = next(iter(records.values()))
     t = record.time_s
