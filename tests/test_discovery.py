@@ -53,6 +53,7 @@ def test_no_extra_effect_nothing_added(tmp_path, seed, speed):
         ),
         ({"pressure_lag_s": 0.25}, "pressure_lag", ("lag_s", 0.25, 0.2)),
         ({"speed_scale_error": 0.02}, "sensor", ("speed_scale_error", 0.02, 0.1)),
+        ({"speed_lag_s": 0.3}, "sensor", ("speed_lag_s", 0.3, 0.15)),
     ],
 )
 def test_undeclared_effect_is_named(tmp_path, effect, category, check):

@@ -195,6 +195,18 @@ def _fit_sensor_balance(trace, residual, mask):
     return {"speed_scale_error": s}, res
 
 
+def _fit_sensor_lag(trace, residual, mask):
+    """Ground speed logged ``tau`` late: the logged speed trails the true one by ``tau a``."""
+    measured_drop = -masked_cumdiff(trace.v_train_kmh, balance_intervals(trace))
+    predicted_drop = residual + measured_drop  # km/h (residual = predicted - measured drop)
+    decel_kmh_s = np.gradient(predicted_drop, trace.time_s)
+    # measured drop(t) = true drop(t - tau) ~ true drop(t) - tau a(t): residual ~ tau a(t)
+    coef, res = _linear(residual, mask, [decel_kmh_s])
+    if coef[0] <= 0.0:  # a lag cannot lead
+        return None
+    return {"speed_lag_s": float(coef[0])}, res
+
+
 # ---- coasting creep ------------------------------------------------------------------------
 
 
@@ -314,6 +326,7 @@ CANDIDATES_BALANCE = [
     ),
     Candidate("pressure lag", "pressure_lag", "train_speed_balance_kmh", 1, _fit_lag),
     Candidate("ground-speed scale", "sensor", "train_speed_balance_kmh", 1, _fit_sensor_balance),
+    Candidate("ground-speed lag", "sensor", "train_speed_balance_kmh", 1, _fit_sensor_lag),
 ]
 CANDIDATES_COASTING = [
     Candidate("wheel radius per axle", "wheel_radius", "coasting_creep_pct", 4, _fit_radius),

@@ -39,6 +39,7 @@ def simulate_trace(
     height_scale: float = 1.0,
     pressure_lag_s: float = 0.0,
     speed_scale_error: float = 0.0,
+    speed_lag_s: float = 0.0,
     **case: Any,
 ) -> tuple[Path, Path, dict[str, Any]]:
     """Simulate, sample and write ``STEM.csv`` + ``STEM.meta.json``; return paths and metrics.
@@ -50,7 +51,8 @@ def simulate_trace(
     ``pad_factor``: true / nominal pad friction. ``coast_s``: coasting before the demand rises.
     ``resistance_scale``: true / nominal running resistance. ``height_scale``: true / nominal
     CoG and pivot heights (load transfer). ``pressure_lag_s``: the brake force lags the logged
-    pressure. ``speed_scale_error``: the ground-speed sensor's scale error.
+    pressure. ``speed_scale_error`` / ``speed_lag_s``: the ground-speed sensor's scale error and
+    lag.
     """
     suite = SuiteConfig(
         name="synthetic",
@@ -95,6 +97,10 @@ def simulate_trace(
     if pressure_lag_s:  # the brake force follows the logged pressure pressure_lag_s later
         lead = np.stack([np.interp(t + pressure_lag_s, t, p) for p in record.p_cyl_bar.T], axis=1)
         record = dataclasses.replace(record, p_cyl_bar=lead)
+    if speed_lag_s:  # the ground-speed reading trails the train by speed_lag_s
+        record = dataclasses.replace(
+            record, v_train_kmh=np.interp(t - speed_lag_s, t, record.v_train_kmh)
+        )
     if speed_scale_error:  # ground-speed sensor reads (1 + error) times the true speed
         record = dataclasses.replace(
             record, v_train_kmh=record.v_train_kmh * (1 + speed_scale_error)
