@@ -180,3 +180,15 @@ def test_loop_holds_beyond_its_own_generator(tmp_path, variant):
     added = discover(read_trace(sloped)).added
     assert [s.category for s in added] == ["gradient"]
     assert added[0].parameters["gradient_permille"] == pytest.approx(grade, rel=0.15, abs=0.5)
+
+
+def test_effect_outside_the_library_is_reported_not_misnamed(tmp_path):
+    """A periodic ground-speed error (no candidate has its shape): at most the sensor family is
+    named (the coasting creep sees a speed error), and the balance is reported unexplained."""
+    result = discover(read_trace(_trace(tmp_path, "ripple", speed_ripple_kmh=1.5)))
+    assert {s.category for s in result.added} <= {"sensor"}
+    assert "train_speed_balance_kmh" in [u["channel"] for u in result.unexplained]
+
+
+def test_clean_trace_leaves_nothing_unexplained(tmp_path):
+    assert discover(read_trace(_trace(tmp_path, "clean_u", seed=4))).unexplained == []

@@ -301,6 +301,7 @@ def cmd_calibrate(args: argparse.Namespace) -> dict[str, Any]:
         "errors_before": result.errors_before,
         "errors_after": result.errors_after,
         "added_effects": [s.as_dict() for s in result.added],
+        "unexplained": result.unexplained,
         "candidates": result.considered,
         "notes": trace.notes,
         "outputs": [],
@@ -324,6 +325,11 @@ def _print_calibrate(result: dict[str, Any]) -> None:
         params = ", ".join(f"{k} {v:.4g}" for k, v in e["parameters"].items())
         change = f"{e['before']:.3f} -> {e['after']:.3f}"
         print(f"  added {e['category']} on {e['channel']}: {change} ({params})")
+    for u in result["unexplained"]:
+        print(
+            f"  unexplained: {u['channel']} still {u['rmse']:.3f} "
+            f"(noise floor {u['noise_floor']:.3f}) - an effect outside the library"
+        )
     for p in result["outputs"]:
         print(f"  wrote {p}")
 

@@ -58,6 +58,7 @@ MIN_REDUCTION = 0.2
 NOISE_FACTOR = 2.0
 MAX_EFFECTS = 4
 TIE_GAIN = 0.02
+UNEXPLAINED_FACTOR = 3.0
 
 
 @dataclass
@@ -97,6 +98,9 @@ class Result:
     errors_after: dict[str, float]
     added: list[Step] = field(default_factory=list)
     considered: list[dict[str, Any]] = field(default_factory=list)
+    # channels still well above their noise floor once nothing more qualifies: an effect the
+    # library does not hold ("other"), reported rather than forced onto a wrong category
+    unexplained: list[dict[str, float | str]] = field(default_factory=list)
 
 
 # ---- linear fits on the balance channel ------------------------------------------------------
@@ -454,4 +458,10 @@ def discover(trace: Trace) -> Result:
                 m = masks[ch]
                 result.errors_after[ch] = float(np.sqrt(np.mean(residual[ch][m] ** 2)))
         result.added.append(step)
+    for ch, floor in floors.items():
+        m = masks[ch]
+        if m.sum() >= 10:
+            rmse = float(np.sqrt(np.mean(residual[ch][m] ** 2)))
+            if rmse > UNEXPLAINED_FACTOR * max(floor, 1e-9):
+                result.unexplained.append({"channel": ch, "rmse": rmse, "noise_floor": floor})
     return result

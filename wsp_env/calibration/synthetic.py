@@ -40,6 +40,7 @@ def simulate_trace(
     pressure_lag_s: float = 0.0,
     speed_scale_error: float = 0.0,
     speed_lag_s: float = 0.0,
+    speed_ripple_kmh: float = 0.0,
     **case: Any,
 ) -> tuple[Path, Path, dict[str, Any]]:
     """Simulate, sample and write ``STEM.csv`` + ``STEM.meta.json``; return paths and metrics.
@@ -97,6 +98,9 @@ def simulate_trace(
     if pressure_lag_s:  # the brake force follows the logged pressure pressure_lag_s later
         lead = np.stack([np.interp(t + pressure_lag_s, t, p) for p in record.p_cyl_bar.T], axis=1)
         record = dataclasses.replace(record, p_cyl_bar=lead)
+    if speed_ripple_kmh:  # outside the effect library: a periodic ground-speed error (7 s)
+        ripple = speed_ripple_kmh * np.sin(2.0 * np.pi * t / 7.0)
+        record = dataclasses.replace(record, v_train_kmh=record.v_train_kmh + ripple)
     if speed_lag_s:  # the ground-speed reading trails the train by speed_lag_s
         record = dataclasses.replace(
             record, v_train_kmh=np.interp(t - speed_lag_s, t, record.v_train_kmh)
