@@ -192,3 +192,19 @@ def test_effect_outside_the_library_is_reported_not_misnamed(tmp_path):
 
 def test_clean_trace_leaves_nothing_unexplained(tmp_path):
     assert discover(read_trace(_trace(tmp_path, "clean_u", seed=4))).unexplained == []
+
+
+@pytest.mark.parametrize("grade,pad", [(-15.0, 0.95), (-4.0, 0.8)])
+def test_two_effects_on_the_same_channel(tmp_path, grade, pad):
+    """A gradient and weaker pads together, either one dominant: both are named.
+
+    The two are nearly collinear (a constant force against one proportional to the brake force,
+    distinguished only by the build-up and the WSP's modulation), so the gradient comes back to
+    +-1.5 permille rather than the +-0.1 of a gradient alone."""
+    result = discover(
+        read_trace(_trace(tmp_path, f"g{grade}", seed=2, gradient_permille=grade, pad_factor=pad))
+    )
+    found = {s.category: s.parameters for s in result.added}
+    assert set(found) == {"gradient", "pad_friction"}
+    assert found["gradient"]["gradient_permille"] == pytest.approx(grade, abs=1.5)
+    assert found["pad_friction"]["scale"] == pytest.approx(pad, abs=0.02)

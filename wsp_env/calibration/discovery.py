@@ -24,10 +24,16 @@ Regressors in the balance channel enter linearly: an extra retarding force ``dF(
 changes the predicted speed by ``+c/M int phi dt``, so the least-squares coefficient ``c`` of the
 regressor ``1/M int phi dt`` gives the force as ``-c phi``.
 
-Choice: among qualifying candidates, those within ``TIE_GAIN`` of the largest RMSE reduction
-count as equally good, and the one with the fewest parameters wins — a constant force is a
-gradient before it is a running resistance with a spare term (logged samples are strongly
-correlated, so the BIC's penalty alone would let a spare parameter through).
+Pairs of one-parameter force effects (gradient, pad friction, unmeasured brake force) are also
+fitted jointly, so that two effects acting together are not absorbed by one two-parameter
+effect of another shape; a pair qualifies only if each term earns its place (the pair beats
+either term alone by ``MIN_REDUCTION``).
+
+Choice: the channel with the largest relative RMSE cut goes first; on it, candidates whose
+remaining error lies within half a noise floor of the best count as equally good, and the one
+with the fewest parameters wins — a constant force is a gradient before it is a running
+resistance with a spare term (logged samples are strongly correlated, so the BIC's penalty
+alone would let a spare parameter through).
 """
 
 from __future__ import annotations
@@ -57,7 +63,6 @@ MIN_DELTA_BIC = 10.0
 MIN_REDUCTION = 0.2
 NOISE_FACTOR = 2.0
 MAX_EFFECTS = 4
-TIE_GAIN = 0.02
 UNEXPLAINED_FACTOR = 3.0
 
 
@@ -211,6 +216,30 @@ def _fit_sensor_lag(trace, residual, mask):
     return {"speed_lag_s": float(coef[0])}, res
 
 
+# one-parameter force effects that can also act together (a gradient *and* weaker pads)
+def _pair_terms(trace: Trace) -> dict[str, tuple[np.ndarray, Callable[[float], dict[str, float]]]]:
+    mass = float(trace.vehicle["mass_kg"])
+    brake = brake_force_N(trace).sum(axis=1)
+    return {
+        "gradient": (
+            _balance_regressor(trace, np.full(len(trace.time_s), mass * G)),
+            lambda c: {"gradient_permille": -1000.0 * c},
+        ),
+        "pad_friction": (_balance_regressor(trace, brake), lambda c: {"scale": 1.0 - c}),
+        "unmeasured_brake_force": (
+            _balance_regressor(trace, _demand_fraction(trace)),
+            lambda c: {"force_at_full_demand_N": -c},
+        ),
+    }
+
+
+PAIR_NAMES = {
+    "gradient": "gradient",
+    "pad_friction": "pad friction",
+    "unmeasured_brake_force": "unmeasured brake force",
+}
+
+
 # ---- coasting creep ------------------------------------------------------------------------
 
 
@@ -344,6 +373,14 @@ def _noise_floor_kmh(trace: Trace) -> float:
     return float(np.median(np.abs(d2)) / 0.6745 / math.sqrt(6.0))
 
 
+def _channel_of(cand: Any) -> str:
+    if isinstance(cand, tuple):
+        return "train_speed_balance_kmh"
+    if isinstance(cand, str):
+        return "adhesion_fit_kN"
+    return cand.channel
+
+
 def _bic(rss: float, n: int, k: int) -> float:
     return n * math.log(max(rss, 1e-300) / n) + k * math.log(n)
 
@@ -397,6 +434,34 @@ def discover(trace: Trace) -> Result:
                 gain = 1 - rmse1 / rmse0
                 if dbic < -MIN_DELTA_BIC and gain >= MIN_REDUCTION:
                     qualified.append((gain, cand, params, new, rmse0, rmse1, dbic, k))
+        ch = "train_speed_balance_kmh"
+        res, mask = residual[ch], masks[ch]
+        n = int(mask.sum())
+        if n >= 10 and not any(c + ch in used for c in PAIR_NAMES):
+            rss0 = float(np.sum(res[mask] ** 2))
+            rmse0 = math.sqrt(rss0 / n)
+            if rmse0 >= NOISE_FACTOR * floors[ch]:
+                terms = _pair_terms(trace)
+                names = list(terms)
+                single = {}
+                for a in names:
+                    _, r1 = _linear(res, mask, [terms[a][0]])
+                    single[a] = math.sqrt(float(np.sum(r1[mask] ** 2)) / n)
+                for i, a in enumerate(names):
+                    for b in names[i + 1 :]:
+                        coef, new = _linear(res, mask, [terms[a][0], terms[b][0]])
+                        rmse1 = math.sqrt(float(np.sum(new[mask] ** 2)) / n)
+                        dbic = _bic(rmse1**2 * n, n, 2) - _bic(rss0, n, 0)
+                        gain = 1 - rmse1 / rmse0
+                        # each term must earn its place against the other alone
+                        earns = rmse1 <= (1 - MIN_REDUCTION) * min(single[a], single[b])
+                        row = {"name": f"{a} + {b}", "category": f"{a}+{b}", "channel": ch,
+                               "before": rmse0, "after": rmse1, "delta_bic": dbic}  # fmt: skip
+                        result.considered.append(row)
+                        if dbic < -MIN_DELTA_BIC and gain >= MIN_REDUCTION and earns:
+                            params = (terms[a][1](coef[0]), terms[b][1](coef[1]))
+                            pair = ((a, params[0], single[a]), (b, params[1], rmse1))
+                            qualified.append((gain, pair, None, new, rmse0, rmse1, dbic, 2))
         adhesion_candidates = (
             ("per_axle", "adhesion_per_axle", trace.n_axles - 1),
             ("load_transfer", "load_transfer", 1),
@@ -431,11 +496,27 @@ def discover(trace: Trace) -> Result:
                 qualified.append((gain, key, params, None, adh_rmse, rmse1, dbic, k))
         if not qualified:
             break
-        # the largest cut wins; cuts within TIE_GAIN of it are a tie, broken by fewer parameters
-        # (logged samples are correlated, so BIC alone over-rewards a spare parameter)
-        top = max(q[0] for q in qualified)
-        best = min((q for q in qualified if q[0] >= top - TIE_GAIN), key=lambda q: (q[7], -q[0]))
+        # the channel with the largest relative cut goes first; on it, candidates whose remaining
+        # error is within half a noise floor of the best are a tie, broken by fewer parameters
+        lead = max(qualified, key=lambda q: q[0])
+        channel = _channel_of(lead[1])
+        same = [q for q in qualified if _channel_of(q[1]) == channel]
+        margin = 0.5 * floors.get(channel, 0.05 * lead[4])
+        best_after = min(q[5] for q in same)
+        best = min((q for q in same if q[5] <= best_after + margin), key=lambda q: (q[7], q[5]))
         gain, cand, params, new, rmse0, rmse1, dbic, _ = best
+        if isinstance(cand, tuple):  # two force effects fitted together on the balance
+            ch = "train_speed_balance_kmh"
+            residual[ch] = new
+            before = rmse0
+            for category, p_fit, after in cand:
+                used.add(category + ch)
+                result.added.append(
+                    Step(PAIR_NAMES[category], category, ch, p_fit, before, after, dbic)
+                )
+                before = after
+            result.errors_after[ch] = rmse1
+            continue
         if isinstance(cand, str):  # adhesion effect
             adhesion[cand] = True
             adh_rmse = rmse1
