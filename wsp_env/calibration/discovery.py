@@ -326,8 +326,9 @@ def _fit_adhesion(trace, per_axle: bool, load_transfer: bool, position: bool = F
     sol = least_squares(lambda p: model(p) - force, p0, bounds=(lo, hi))
     span = np.asarray(hi) - np.asarray(lo)
     at_bound = (np.abs(sol.x - lo) < 1e-4 * span) | (np.abs(sol.x - hi) < 1e-4 * span)
-    if (per_axle or load_transfer or position) and at_bound[3:].any():
-        return None  # an extension whose fit runs to a bound is not identified by these data
+    at_bound[2] = abs(sol.x[2] - hi[2]) < 1e-4 * span[2]  # K_rozv = 0 is a law, not a bound
+    if (per_axle or load_transfer or position) and at_bound.any():
+        return None  # a fit that runs to a bound is not identified by these data
     return sol.x, sol.fun
 
 
