@@ -6,9 +6,6 @@ an interrupted run never leaves a half-written report.
 
 from __future__ import annotations
 
-import os
-import shutil
-import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -17,7 +14,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from wsp_env.plotting import plot_run
-from wsp_env.trace_io import RunRecord
+from wsp_env.trace_io import RunRecord, replace_dir_atomically
 
 
 def _fmt(stats: dict[str, float], digits: int = 1) -> str:
@@ -55,19 +52,9 @@ def write_report(
     records: dict[str, dict[tuple[str, int], RunRecord]],
 ) -> Path:
     """Write ``report.md`` and ``plots/*.png`` into ``directory`` (replacing an old report)."""
-    target = Path(directory)
-    if target.exists() and any(target.iterdir()) and not (target / "report.md").exists():
-        raise ValueError(f"{target}: exists and is not a wsp-env report folder; not overwriting")
-    target.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent))
-    try:
-        _build(tmp, suite, vehicle, results, summary, records)
-        if target.exists():
-            shutil.rmtree(target)
-        os.replace(tmp, target)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
+    target = replace_dir_atomically(
+        directory, lambda tmp: _build(tmp, suite, vehicle, results, summary, records)
+    )
     return target / "report.md"
 
 

@@ -16,6 +16,7 @@ import json
 import math
 import os
 import re
+import shutil
 import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -388,6 +389,26 @@ def write_atomically(target: Path, write: Callable[[IO[Any]], None], binary: boo
     except BaseException:
         with contextlib.suppress(OSError):
             tmp.unlink()
+        raise
+    return target
+
+
+def replace_dir_atomically(target: str | Path, build: Callable[[Path], None]) -> Path:
+    """Build a report folder through ``build(tmp)`` in a temp folder beside ``target``, then
+    swap it in: an interrupted run never leaves a half-written folder. An existing ``target``
+    is replaced only if it is empty or holds a ``report.md`` (an earlier report)."""
+    target = Path(target)
+    if target.exists() and any(target.iterdir()) and not (target / "report.md").exists():
+        raise ValueError(f"{target}: exists and is not a wsp-env report folder; not overwriting")
+    target.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent))
+    try:
+        build(tmp)
+        if target.exists():
+            shutil.rmtree(target)
+        os.replace(tmp, target)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
         raise
     return target
 

@@ -16,9 +16,6 @@ Used as::
 
 from __future__ import annotations
 
-import os
-import shutil
-import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -31,7 +28,7 @@ from wsp_env.calibration.adhesion_estimate import eq9, estimate_adhesion, fit_po
 from wsp_env.calibration.discovery import Result
 from wsp_env.calibration.residuals import channels
 from wsp_env.calibration.traces import Trace
-from wsp_env.trace_io import write_atomically
+from wsp_env.trace_io import replace_dir_atomically, write_atomically
 
 
 def scenario_options(result: Result) -> dict[str, Any]:
@@ -92,21 +89,7 @@ def export_config(path: str | Path, trace: Trace, result: Result) -> tuple[Path,
 
 def write_report(directory: str | Path, trace: Trace, result: Result) -> Path:
     """``report.md`` + plots: errors before/after, added effects, residuals, adhesion curves."""
-    target = Path(directory)
-    if target.exists() and any(target.iterdir()) and not (target / "report.md").exists():
-        raise ValueError(
-            f"{target}: exists and is not a calibration report folder; not overwriting"
-        )
-    target.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent))
-    try:
-        _build(tmp, trace, result)
-        if target.exists():
-            shutil.rmtree(target)
-        os.replace(tmp, target)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
+    target = replace_dir_atomically(directory, lambda tmp: _build(tmp, trace, result))
     return target / "report.md"
 
 
