@@ -8,7 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from wsp_env.calibration.adhesion_estimate import eq9, estimate_adhesion, fit_polach
+from wsp_env.calibration.adhesion_estimate import eq9, eq9_slope, estimate_adhesion, fit_polach
+from wsp_env.calibration.discovery import fit_adhesion_model
 from wsp_env.calibration.synthetic import simulate_trace
 from wsp_env.calibration.traces import read_trace
 from wsp_env.config import RecoveryConfig, load_rail
@@ -17,22 +18,18 @@ from wsp_env.trace_io import SensorModel
 MU0, K, K_ROZV = 0.1497, 30.0, 0.0291  # seed 000 Table 4, axle 1
 
 
-@pytest.fixture(scope="module")
-def fits(tmp_path_factory):
-    """ETR 1000 soap law (Eq. 9), no recovery or cleaning, classical WSP, 50 Hz, no noise."""
+def _etr1000_trace(directory, sensors):
+    """ETR 1000 soap law (Eq. 9 at Table 4's axle 1), no recovery or cleaning, classical WSP."""
     rail = dataclasses.replace(
         load_rail("soap_etr1000"),
         recovery=RecoveryConfig(w_lim=math.inf, w_max=math.inf),
         clean_energy_J_per_m=math.inf,
         pass_removal=0.0,
     )
-    d = tmp_path_factory.mktemp("est")
     csv_path, _, _ = simulate_trace(
-        d / "t", rail, 150.0, sensors=SensorModel(sample_period_s=0.02), mu_contaminated=MU0,
-        pattern="uniform",
-    )  # fmt: skip
-    trace = read_trace(csv_path)
-    return [fit_polach(a) for a in estimate_adhesion(trace)]
+        directory / "t", rail, 150.0, sensors=sensors, mu_contaminated=MU0, pattern="uniform"
+    )
+    return read_trace(csv_path)
 
 
 def test_eq9_reads_table4_units():
@@ -41,25 +38,30 @@ def test_eq9_reads_table4_units():
     )
 
 
-def test_fitted_curves_follow_the_generating_law(fits):
-    """Each bogie's mean fitted Eq. 9 curve within 15 % of the generating one over the WSP's
-    operating range (creepage up to 0.2 at 100 km/h), with the bogie-pitch signature.
-
-    Not yet the 10 % parameter recovery issue 5 asks for: single axles are up to ~20 % off in a
-    fixed pattern because the metadata cannot describe the bogie-pitch load transfer (only the
-    body's), so leading axles of each bogie look grippier; and mu0 and K_rozv trade off against
-    each other in the fit. The first is a missing effect for the calibration loop to add.
-    """
-    xi = np.linspace(0.01, 0.2, 20)
-    true = eq9(xi, 100.0 * xi, MU0, K, K_ROZV)
-    for pair in ((0, 1), (2, 3)):
-        mean = np.mean(
-            [eq9(xi, 100.0 * xi, fits[i].mu0, fits[i].K, fits[i].K_rozv) for i in pair], axis=0
-        )
-        assert np.max(np.abs(mean / true - 1)) < 0.15
-    assert fits[0].mu0 > fits[1].mu0 and fits[2].mu0 > fits[3].mu0
+@pytest.mark.parametrize(
+    "sensors",
+    [
+        SensorModel(sample_period_s=0.02),
+        SensorModel(sample_period_s=0.1),
+        SensorModel(sample_period_s=0.1, speed_noise_kmh=0.03, pressure_noise_bar=0.01),
+    ],
+    ids=["50Hz", "10Hz", "10Hz_noisy"],
+)
+def test_polach_parameters_recovered_within_10_percent(tmp_path, sensors):
+    """mu0, K and K_rozv of the generating Eq. 9 law come back within 10 % (measured: within
+    3.4 %) from the critical points of all axles, with the bogie-pitch term the metadata cannot
+    supply (it comes back as the vehicle's ~7 kN per m/s^2). Single axles carry that pitch as a
+    +-10 % pattern in mu0, leading axles grippier; at 0.1 km/h speed noise K_rozv is 12 % off
+    (notes)."""
+    trace = _etr1000_trace(tmp_path, sensors)
+    fit = fit_adhesion_model(trace, per_axle=False, load_transfer=True)
+    assert fit is not None and not fit.at_bound
+    np.testing.assert_allclose(fit.params[:3], [MU0, K, K_ROZV], rtol=0.10)
+    assert 5.0 < fit.params[3] < 9.0
+    fits = [fit_polach(a.points) for a in estimate_adhesion(trace)]
+    assert fits[0].mu0 > fits[1].mu0 and fits[2].mu0 > fits[3].mu0  # the pitch pattern
     for f in fits:
-        assert f.n_points > 50 and f.rmse < 0.015
+        assert f.n_points >= 10 and abs(f.K / K - 1) < 0.15
 
 
 @pytest.mark.parametrize("seed", [0, 1])
@@ -77,7 +79,24 @@ def test_soap_cleaning_shows_in_the_fitted_mu0_oil_does_not(tmp_path, seed):
             tmp_path / rail, load_rail(rail), 120.0, sensors=sensors, seed=seed,
             mu_contaminated=mu, pattern="uniform",
         )  # fmt: skip
-        m = [f.mu0 for f in (fit_polach(a) for a in estimate_adhesion(read_trace(csv_path)))]
+        m = [f.mu0 for f in (fit_polach(a.points) for a in estimate_adhesion(read_trace(csv_path)))]
         ratios[rail] = (m[2] + m[3]) / (m[0] + m[1])
     assert ratios["soap"] > 1.05
     assert ratios["oil"] < 1.02
+
+
+def test_eq9_slope_matches_the_derivative_at_fixed_speed():
+    """The effective-variance weights use d eq9 / d xi with DV = xi V moving along."""
+    xi = np.array([0.001, 0.02, 0.2])
+    speed_kmh = 100.0
+    h = 1e-7
+    numeric = (
+        eq9(xi + h, (xi + h) * speed_kmh, MU0, K, K_ROZV)
+        - eq9(xi - h, (xi - h) * speed_kmh, MU0, K, K_ROZV)
+    ) / (2 * h)
+    slope = eq9_slope(xi, xi * speed_kmh, MU0, K, K_ROZV)
+    np.testing.assert_allclose(slope, numeric, rtol=1e-4)
+    # the initial slope of Eq. 9 is K
+    assert eq9_slope(np.array([1e-6]), np.array([1e-4]), MU0, K, K_ROZV)[0] == pytest.approx(
+        K, rel=1e-3
+    )

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
+import math
 
 import pytest
 
@@ -14,19 +16,42 @@ from wsp_env.config import load_rail
 from wsp_env.trace_io import SensorModel
 
 SENSORS = SensorModel(sample_period_s=0.1, speed_noise_kmh=0.1, pressure_noise_bar=0.01)
+# Soap (seed 002 law and recovery) without rail cleaning: the calibration's nominal adhesion
+# model is one law for all axles, so on a cleaning rail it rightly reports the cleaning pattern
+# as adhesion_per_axle (tested on its own below); the other tests use a rail without it.
+SOAP = dataclasses.replace(load_rail("soap"), clean_energy_J_per_m=math.inf, pass_removal=0.0)
+# Oil: the seed 000 Eq. 9 law, no recovery; an oil patch is seed 000's position-dependent case.
+OIL = load_rail("oil")
+# 0-500 m at contamination 2/3 (mu ~0.107), beyond at 1 (mu 0.06): a step down on the rail
+OIL_STEP = ((0.0, 500.0, 0.667), (500.0, 5000.0, 1.0))
 
 
-def _trace(tmp_path, name, seed=0, speed=120.0, sensors=SENSORS, **effect):
+def _trace(tmp_path, name, seed=0, speed=120.0, sensors=SENSORS, rail=SOAP, **effect):
+    effect.setdefault("mu_contaminated", 0.08 if rail is SOAP else 0.06)
     csv_path, _, _ = simulate_trace(
-        tmp_path / name, load_rail("soap"), speed, sensors=sensors, seed=seed,
-        mu_contaminated=0.08, pattern="uniform", **effect,
-    )  # fmt: skip
+        tmp_path / name, rail, speed, sensors=sensors, seed=seed, pattern="uniform", **effect
+    )
     return csv_path
 
 
+@pytest.mark.parametrize(
+    "seed,speed,rail", [(0, 120.0, SOAP), (1, 100.0, SOAP), (2, 140.0, SOAP), (0, 120.0, OIL)]
+)
+def test_no_extra_effect_nothing_added(tmp_path, seed, speed, rail):
+    assert discover(read_trace(_trace(tmp_path, "clean", seed, speed, rail=rail))).added == []
+
+
 @pytest.mark.parametrize("seed,speed", [(0, 120.0), (1, 100.0), (2, 140.0)])
-def test_no_extra_effect_nothing_added(tmp_path, seed, speed):
-    assert discover(read_trace(_trace(tmp_path, "clean", seed, speed))).added == []
+def test_rail_cleaning_is_reported_as_per_axle_adhesion(tmp_path, seed, speed):
+    """Soap with rail cleaning (sliding leading axles clean the rail for the trailing ones):
+    nothing is added but adhesion_per_axle, and where it is, the rear bogie has the better grip
+    (seed 000 Table 4)."""
+    path = _trace(tmp_path, "cleaning", seed, speed, rail=load_rail("soap"))
+    added = discover(read_trace(path)).added
+    assert {s.category for s in added} <= {"adhesion_per_axle"}
+    for step in added:
+        f = [1.0] + [step.parameters[f"axle_{i}_factor"] for i in (2, 3, 4)]
+        assert f[2] + f[3] > f[0] + f[1]
 
 
 @pytest.mark.parametrize(
@@ -40,8 +65,10 @@ def test_no_extra_effect_nothing_added(tmp_path, seed, speed):
             "wheel_radius",
             ("axle_2_radius_error", 0.01, 0.15),
         ),
+        # on oil (Eq. 9, no recovery): on soap the law mismatch leaves a higher floor and the
+        # same factors cut the channel by 46 % (notes)
         (
-            {"axle_mu_factor": (0.6, 0.75, 0.9, 1.0)},
+            {"axle_mu_factor": (0.6, 0.75, 0.9, 1.0), "rail": OIL},
             "adhesion_per_axle",
             ("axle_4_factor", 1 / 0.6, 0.15),
         ),
@@ -54,6 +81,18 @@ def test_no_extra_effect_nothing_added(tmp_path, seed, speed):
         ({"pressure_lag_s": 0.25}, "pressure_lag", ("lag_s", 0.25, 0.2)),
         ({"speed_scale_error": 0.02}, "sensor", ("speed_scale_error", 0.02, 0.1)),
         ({"speed_lag_s": 0.3}, "sensor", ("speed_lag_s", 0.3, 0.15)),
+        # CoG and pivot heights x4: bogie pitch the metadata cannot describe (the nominal
+        # vehicle's pitch fits ~7 kN per m/s^2, so x4 is ~28)
+        (
+            {"height_scale": 4.0, "rail": OIL},
+            "load_transfer",
+            ("bogie_pitch_kN_per_mps2", 28.0, 0.2),
+        ),
+        (
+            {"sections": OIL_STEP, "rail": OIL},
+            "adhesion_position",
+            ("factor_beyond_step", 0.06 / 0.107, 0.1),
+        ),
     ],
 )
 def test_undeclared_effect_is_named(tmp_path, effect, category, check):
@@ -62,8 +101,9 @@ def test_undeclared_effect_is_named(tmp_path, effect, category, check):
     step = result.added[0]
     key, value, rel = check
     assert step.parameters[key] == pytest.approx(value, rel=rel)
-    if category != "adhesion_per_axle":  # the adhesion channel keeps a model floor (see notes)
-        assert step.after <= 0.5 * step.before
+    assert step.after <= 0.5 * step.before
+    if category == "adhesion_position":
+        assert step.parameters["step_position_m"] == pytest.approx(500.0, abs=40.0)
 
 
 def test_two_effects_at_once(tmp_path):
@@ -178,8 +218,14 @@ def test_loop_holds_beyond_its_own_generator(tmp_path, variant):
         clean, sloped = _to_vendor_names(clean), _to_vendor_names(sloped)
     assert discover(read_trace(clean)).added == []
     added = discover(read_trace(sloped)).added
-    assert [s.category for s in added] == ["gradient"]
+    balance = [s for s in added if s.channel == "train_speed_balance_kmh"]
+    assert [s.category for s in balance] == ["gradient"] and added[0] is balance[0]
     assert added[0].parameters["gradient_permille"] == pytest.approx(grade, rel=0.15, abs=0.5)
+    # the vehicle's own bogie pitch is real and undeclared (the metadata has no pivot height):
+    # with the seed 002 WSP's long slides it shows (~7 kN per m/s^2), and may be named
+    for step in added[1:]:
+        assert step.category == "load_transfer"
+        assert step.parameters["bogie_pitch_kN_per_mps2"] == pytest.approx(7.0, abs=2.0)
 
 
 def test_effect_outside_the_library_is_reported_not_misnamed(tmp_path):

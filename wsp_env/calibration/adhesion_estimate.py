@@ -1,27 +1,44 @@
 """Adhesion from measured data (seed 000 §3): pressure -> brake torque -> adhesion force -> mu,
-creepage from ground and axle speeds, critical points, and a Polach (Eq. 9) fit per axle.
+creepage from ground and axle speeds, critical points, and a Polach (Eq. 9) fit.
 
-Per axle ``i`` and sample:
+Per axle ``i`` the seed's wheelset equation ``J domega/dt = F r - T`` is solved for the
+adhesion force ``F``, with the brake torque from the nominal linear law
+``T = gain (p - p_th)^+`` (seed 000 Eqs. 3–6, ``TRACE_FORMAT.md``), the normal load from the
+metadata (static, plus the body's load transfer ``+- m a h / L`` on the leading / trailing
+bogie when CoG height and bogie spacing are given), ``mu = F / N`` (Eq. 7), creepage
+``xi = (V - v_i) / V`` (Eq. 8) and sliding speed ``DV = V - v_i``.
 
-* brake torque from the nominal linear law ``T = gain (p - p_th)^+`` (seed 000 Eqs. 3–6,
-  ``TRACE_FORMAT.md``);
-* the wheelset equation ``J domega/dt = F r - T`` solved for the adhesion force
-  ``F = (T + J domega/dt) / r``, with ``domega/dt`` from a Savitzky–Golay derivative of the
-  measured axle speed (robust to sensor noise; window ``smooth_s``);
-* normal load: static load from the metadata (or ``m g / n``) plus the body's load transfer
-  ``+- m a h / L`` on the leading / trailing bogie when CoG height and bogie spacing are given
-  (seed 000 §3: "a simplified model of the vehicle"); ``a`` from ``a_train_mps2`` or ``-dV/dt``;
-* ``mu = F / N`` (Eq. 7), creepage ``xi = (V - v_i) / V`` (Eq. 8), sliding speed ``DV = V - v_i``;
-* **critical points**: where the creepage derivative changes sign (WSP turning points, at which
-  the used adhesion equals the available one), plus the low-sliding points (0 < DV < 0.2 km/h)
-  that carry the curve's initial slope; speeds below ``min_speed_kmh`` are dropped (seed 001:
-  at low speed small slides give meaningless creepage);
-* Eq. 9 fitted to the critical points by bounded least squares: ``mu0``, ``K``, ``K_rozv``
-  (``DV`` in km/h, as in ``physics.adhesion``).
+**Critical points** (seed 000 §3, Fig. 4) are the samples where the creepage derivative changes
+sign — the used adhesion equals the available one there — plus the low-sliding points
+(``0 < DV < 0.2 km/h``, here at a sample *and* both neighbours: a wheel rolling with the
+train, not one passing through on its way back from a slide) that carry the curve's initial
+slope. At a critical point the creepage, hence the force, is stationary, which is what makes a
+logged trace usable: a 10 Hz log cannot resolve a wheel that decelerates at 15 m/s² one tenth of
+a second and accelerates the next, so the wheelset equation is not differentiated but
+integrated over ``[t_k-1, t_k+1]`` with ``F`` constant there::
+
+    F_k = ( mean T over [t_k-1, t_k+1] + J (omega_k+1 - omega_k-1) / (t_k+1 - t_k-1) ) / r
+
+(the torque mean by the trapezoid rule). A turning point whose parabola vertex lies more than
+``VERTEX_MAX`` of a sample from ``t_k`` is dropped: the force is not stationary across its window.
+Speeds below ``min_speed_kmh`` are dropped (seed 001: at low speed small slides give meaningless
+creepage).
+
+**Fit** (Eq. 9: ``mu0``, ``K``, ``K_rozv``; ``DV`` in km/h as in ``physics.adhesion``): bounded
+least squares, each point weighted by its *effective variance* (Orear 1982)
+``sigma^2 = sigma_F^2 + (N df/dxi sigma_xi)^2``: the creepage of a point on the curve's steep
+initial slope is known only to ``~ sqrt(2) sigma_v / V`` from noisy speed sensors, and on that
+slope this is worth more force than the whole force error. ``sigma_F`` combines the inertia
+term's sensor noise, the pressure noise and ``FORCE_REL_ERROR`` of the force (normal loads the
+metadata cannot describe: bogie pitch). The weights follow the fitted curve's slope
+(re-weighted ``REWEIGHT`` times). RMSEs are weighted the same way, in kN of a well-resolved
+point.
 """
 
 from __future__ import annotations
 
+import dataclasses
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -31,18 +48,63 @@ from scipy.signal import savgol_filter
 from wsp_env.calibration.traces import Trace
 
 G = 9.80665
+LOW_SLIDING_KMH = 0.2  # seed 000 §3: low-sliding critical points, 0 < DV < 0.2 km/h
+VERTEX_MAX = 0.3  # samples: a turning point's parabola vertex must lie this close to t_k
+SPEED_RESOLUTION_KMH = 0.01  # floor of the speed-noise estimate (logger resolution)
+FORCE_REL_ERROR = 0.02  # relative force error beyond sensor noise (unknown load distribution)
+REWEIGHT = 2
+
+
+@dataclass
+class CriticalPoints:
+    """Critical points (of one axle, or pooled), one entry per point.
+
+    ``sample`` is the sample index in the trace; ``turning`` is True for creepage turning
+    points, False for low-sliding points; ``sigma_force_N`` / ``sigma_creepage`` are the
+    standard errors of the force and creepage estimates (module docstring).
+    """
+
+    time_s: np.ndarray
+    sample: np.ndarray
+    axle: np.ndarray
+    turning: np.ndarray
+    creepage: np.ndarray
+    sliding_kmh: np.ndarray
+    speed_kmh: np.ndarray
+    position_m: np.ndarray
+    force_N: np.ndarray
+    normal_N: np.ndarray
+    decel_mps2: np.ndarray
+    sigma_force_N: np.ndarray
+    sigma_creepage: np.ndarray
+
+    @property
+    def mu(self) -> np.ndarray:
+        return self.force_N / self.normal_N
+
+    def __len__(self) -> int:
+        return int(self.time_s.size)
+
+    def select(self, keep: np.ndarray) -> CriticalPoints:
+        return CriticalPoints(*(getattr(self, f.name)[keep] for f in dataclasses.fields(self)))
+
+    @staticmethod
+    def concatenate(parts: list[CriticalPoints]) -> CriticalPoints:
+        names = [f.name for f in dataclasses.fields(CriticalPoints)]
+        return CriticalPoints(*(np.concatenate([getattr(p, n) for p in parts]) for n in names))
 
 
 @dataclass
 class AxleAdhesion:
-    """Per-sample estimates for one axle (arrays over the trace's samples)."""
+    """Per-sample estimates for one axle (arrays over the trace's samples, for plots; the
+    per-sample force uses a Savitzky–Golay wheel deceleration) and its critical points."""
 
     mu: np.ndarray
     creepage: np.ndarray
     sliding_kmh: np.ndarray
     force_N: np.ndarray
     normal_N: np.ndarray
-    critical: np.ndarray  # indices of the critical points
+    points: CriticalPoints
 
 
 @dataclass
@@ -52,22 +114,37 @@ class PolachFit:
     mu0: float
     K: float
     K_rozv: float
-    rmse: float
+    rmse: float  # weighted RMS residual of mu
     n_points: int
 
 
-def _uniform_derivative(t: np.ndarray, y: np.ndarray, window_s: float) -> np.ndarray:
-    """d y / d t with a Savitzky–Golay filter on a uniform resampling of ``t``."""
+def _uniform_filter(t: np.ndarray, y: np.ndarray, window_s: float, deriv: int) -> np.ndarray:
+    """Savitzky–Golay smoothing (``deriv=0``) or derivative (``1``) on a uniform resampling."""
     dt = float(np.median(np.diff(t)))
     grid = np.arange(t[0], t[-1] + 0.5 * dt, dt)
     yg = np.interp(grid, t, y)
     win = max(5, round(window_s / dt) | 1)  # odd
     win = min(win, len(grid) if len(grid) % 2 else len(grid) - 1)
     if win <= 3:
-        d = np.gradient(yg, dt)
+        out = np.gradient(yg, dt) if deriv else yg
     else:
-        d = savgol_filter(yg, win, polyorder=2, deriv=1, delta=dt)
-    return np.interp(t, grid, d)
+        out = savgol_filter(yg, win, polyorder=2, deriv=deriv, delta=dt)
+    return np.interp(t, grid, out)
+
+
+def noise_std(y: np.ndarray) -> float:
+    """Std of white noise on a smooth signal, from the median absolute second difference
+    (robust to the signal's own curvature and to outliers)."""
+    d2 = np.diff(np.asarray(y, dtype=float), 2, axis=0).ravel()
+    return float(np.median(np.abs(d2)) / 0.6745 / np.sqrt(6.0)) if d2.size else 0.0
+
+
+def train_deceleration(trace: Trace, smooth_s: float = 1.0) -> np.ndarray:
+    """Train deceleration (m/s², positive when slowing): the logged ``a_train_mps2`` if
+    present, else a Savitzky–Golay derivative of the (smooth) train speed."""
+    if "a_train_mps2" in trace.optional:
+        return np.asarray(trace.optional["a_train_mps2"], dtype=float)
+    return -_uniform_filter(trace.time_s, trace.v_train_kmh / 3.6, smooth_s, 1)
 
 
 def normal_loads(trace: Trace, decel: np.ndarray) -> np.ndarray:
@@ -87,10 +164,13 @@ def normal_loads(trace: Trace, decel: np.ndarray) -> np.ndarray:
     return np.maximum(out, 0.05 * static)
 
 
-def estimate_adhesion(
-    trace: Trace, smooth_s: float = 0.5, min_speed_kmh: float = 20.0
-) -> list[AxleAdhesion]:
-    """Seed 000 §3 estimation for every axle of ``trace``."""
+def _distance_m(trace: Trace) -> np.ndarray:
+    v = trace.v_train_kmh / 3.6
+    return np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(trace.time_s))])
+
+
+def estimate_adhesion(trace: Trace, min_speed_kmh: float = 20.0) -> list[AxleAdhesion]:
+    """Seed 000 §3 estimation for every axle of ``trace`` (see the module docstring)."""
     veh = trace.vehicle
     brake = veh.get("brake", {})
     gain = float(brake.get("torque_gain_Nm_per_bar", 0.0))
@@ -99,27 +179,64 @@ def estimate_adhesion(
     inertia = float(veh.get("wheelset_inertia_kgm2", 0.0))
     t = trace.time_s
     v = trace.v_train_kmh / 3.6
-    if "a_train_mps2" in trace.optional:
-        decel = trace.optional["a_train_mps2"]
-    else:
-        decel = -_uniform_derivative(t, v, smooth_s)
+    decel = train_deceleration(trace)
     normal = normal_loads(trace, decel)
+    x_m = _distance_m(trace)
+    sigma_v = max(noise_std(trace.v_train_kmh), SPEED_RESOLUTION_KMH) / 3.6
+    sigma_p = noise_std(trace.p_cyl_bar)
     out = []
     for i in range(trace.n_axles):
         wheel = trace.v_axle_kmh[:, i] / 3.6
-        omega_dot = _uniform_derivative(t, wheel, smooth_s) / r
         torque = gain * np.maximum(0.0, trace.p_cyl_bar[:, i] - p_th)
-        force = (torque + inertia * omega_dot) / r
-        mu = force / normal[:, i]
+        force = (torque + inertia * _uniform_filter(t, wheel, 0.5, 1) / r) / r
         slide = v - wheel
         creep = np.where(v > 1.0, slide / np.maximum(v, 1.0), 0.0)
-        braking = (torque > 0.05 * gain) & (trace.v_train_kmh > min_speed_kmh)
+        # turning points whose parabola vertex (uniform-grid form) lies near the sample
+        d1 = np.zeros_like(creep)
+        d2 = np.zeros_like(creep)
+        d1[1:-1] = 0.5 * (creep[2:] - creep[:-2])
+        d2[1:-1] = creep[2:] - 2.0 * creep[1:-1] + creep[:-2]
         dcreep = np.diff(creep)
-        turning = np.flatnonzero(np.sign(dcreep[:-1]) * np.sign(dcreep[1:]) < 0) + 1
-        low = np.flatnonzero((slide * 3.6 > 0.0) & (slide * 3.6 < 0.2))
-        critical = np.unique(np.concatenate([turning, low]))
-        critical = critical[braking[critical] & (mu[critical] > 0) & (creep[critical] >= 0)]
-        out.append(AxleAdhesion(mu, creep, 3.6 * slide, force, normal[:, i], critical))
+        turning = np.zeros(creep.size, dtype=bool)
+        turning[1:-1] = np.sign(dcreep[:-1]) * np.sign(dcreep[1:]) < 0
+        turning &= np.abs(d1) < VERTEX_MAX * np.abs(d2)
+        in_band = (slide * 3.6 > 0.0) & (slide * 3.6 < LOW_SLIDING_KMH)
+        low = np.zeros(creep.size, dtype=bool)
+        low[1:-1] = in_band[1:-1] & in_band[:-2] & in_band[2:]
+        k = np.flatnonzero(turning | low)
+        # the wheelset equation integrated over [t_k-1, t_k+1] with F constant there
+        span = t[k + 1] - t[k - 1]
+        torque_mean = (
+            (torque[k - 1] + torque[k]) * (t[k] - t[k - 1])
+            + (torque[k] + torque[k + 1]) * (t[k + 1] - t[k])
+        ) / (2.0 * span)
+        fk = (torque_mean + inertia * (wheel[k + 1] - wheel[k - 1]) / (r * span)) / r
+        sigma_f = np.hypot(
+            inertia * np.sqrt(2.0) * sigma_v / (r * r * span), gain * sigma_p / r
+        )  # fmt: skip
+        pts = CriticalPoints(
+            time_s=t[k],
+            sample=k,
+            axle=np.full(k.size, i),
+            turning=turning[k],
+            creepage=creep[k],
+            sliding_kmh=3.6 * slide[k],
+            speed_kmh=3.6 * v[k],
+            position_m=x_m[k],
+            force_N=fk,
+            normal_N=normal[k, i],
+            decel_mps2=decel[k],
+            sigma_force_N=np.hypot(sigma_f, FORCE_REL_ERROR * np.abs(fk)),
+            sigma_creepage=np.sqrt(2.0) * sigma_v / np.maximum(v[k], 1.0),
+        )
+        keep = (
+            (torque[k] > 0.05 * gain)
+            & (pts.speed_kmh > min_speed_kmh)
+            & (pts.force_N > 0)
+            & (pts.creepage >= 0)
+        )
+        pts = pts.select(keep)
+        out.append(AxleAdhesion(force / normal[:, i], creep, 3.6 * slide, force, normal[:, i], pts))
     return out
 
 
@@ -129,22 +246,86 @@ def eq9(xi: np.ndarray, dv_kmh: np.ndarray, mu0: float, K: float, k_rozv: float)
     return mu0 * (1.0 - np.exp(-np.abs(K * xi) / mu0 * d)) / d
 
 
-def fit_polach(axle: AxleAdhesion) -> PolachFit:
-    """Bounded least-squares fit of Eq. 9 to an axle's critical points."""
-    idx = axle.critical
-    xi, dv, mu = axle.creepage[idx], axle.sliding_kmh[idx], axle.mu[idx]
-    if idx.size < 5:
-        return PolachFit(float("nan"), float("nan"), float("nan"), float("nan"), int(idx.size))
-    mu0_start = float(np.quantile(mu, 0.9))
+def eq9_slope(
+    xi: np.ndarray, dv_kmh: np.ndarray, mu0: float, K: float, k_rozv: float
+) -> np.ndarray:
+    """d eq9 / d xi at fixed train speed (``DV = xi V``, so DV moves with xi), by a central
+    difference."""
+    h = np.maximum(1e-6, 1e-3 * np.abs(xi))
+    nonzero = np.abs(xi) > 1e-9
+    speed_kmh = np.where(nonzero, dv_kmh / np.where(nonzero, xi, 1.0), 0.0)
+    up = eq9(xi + h, (xi + h) * speed_kmh, mu0, K, k_rozv)
+    down = eq9(xi - h, (xi - h) * speed_kmh, mu0, K, k_rozv)
+    return (up - down) / (2.0 * h)
 
-    def resid(p: np.ndarray) -> np.ndarray:
-        return eq9(xi, dv, *p) - mu
 
-    sol = least_squares(
-        resid,
-        x0=[max(mu0_start, 0.02), 30.0, 0.02],
-        bounds=([0.005, 0.5, 0.0], [1.0, 1e4, 1.0]),
-        x_scale=[0.05, 30.0, 0.02],
-    )
-    rmse = float(np.sqrt(np.mean(sol.fun**2)))
-    return PolachFit(float(sol.x[0]), float(sol.x[1]), float(sol.x[2]), rmse, int(idx.size))
+@dataclass
+class LawFit:
+    """A pooled Eq. 9 law (plus extensions) fitted to critical points."""
+
+    params: np.ndarray  # mu0, K, K_rozv, then the extensions' parameters in order
+    residual_kN: np.ndarray  # measured - model force per point
+    sigma_kN: np.ndarray  # effective standard error per point
+    at_bound: bool  # an extension parameter ran to its bound (not identified)
+
+    @property
+    def rmse(self) -> float:
+        """Weighted RMS residual (kN): ``sqrt(sum (r/s)^2 / sum 1/s^2)``."""
+        w = 1.0 / self.sigma_kN**2
+        return float(np.sqrt(np.sum(w * self.residual_kN**2) / np.sum(w)))
+
+    @property
+    def chi2(self) -> float:
+        return float(np.sum((self.residual_kN / self.sigma_kN) ** 2))
+
+
+BASE_START, BASE_LOW, BASE_HIGH = [0.1, 30.0, 0.02], [0.005, 0.5, 0.0], [1.0, 1e4, 1.0]
+
+
+def fit_law(
+    pts: CriticalPoints,
+    factor_of: Callable[[np.ndarray], np.ndarray] | None = None,
+    n_extra: int = 0,
+    start: list[float] | None = None,
+    low: list[float] | None = None,
+    high: list[float] | None = None,
+) -> LawFit | None:
+    """Eq. 9 for every point, times ``factor_of(extra_params)`` (a per-point multiplier on
+    the force, ``None``: 1), by effective-variance weighted least squares (module docstring).
+    Returns ``None`` with fewer than 5 points."""
+    if len(pts) < 5:
+        return None
+    force = pts.force_N / 1e3
+    normal = pts.normal_N / 1e3
+    p0 = np.array(BASE_START + list(start or []), dtype=float)
+    p0[0] = max(float(np.quantile(pts.mu, 0.9)), 0.02)
+    lo = np.array(BASE_LOW + list(low or []), dtype=float)
+    hi = np.array(BASE_HIGH + list(high or []), dtype=float)
+    scale = np.concatenate([[0.05, 30.0, 0.02], np.ones(n_extra)])
+
+    def model(p: np.ndarray) -> np.ndarray:
+        f = eq9(pts.creepage, pts.sliding_kmh, *p[:3]) * normal
+        return f * factor_of(p[3:]) if factor_of is not None else f
+
+    sigma = pts.sigma_force_N / 1e3
+    for _ in range(REWEIGHT + 1):
+        s = sigma
+        sol = least_squares(
+            lambda p, s=s: (model(p) - force) / s, p0, bounds=(lo, hi), x_scale=scale
+        )
+        p0 = sol.x
+        mult = factor_of(p0[3:]) if factor_of is not None else 1.0
+        slope = eq9_slope(pts.creepage, pts.sliding_kmh, *p0[:3]) * normal * mult
+        sigma = np.hypot(pts.sigma_force_N / 1e3, slope * pts.sigma_creepage)
+    span = hi - lo
+    hit = (np.abs(p0 - lo) < 1e-4 * span) | (np.abs(p0 - hi) < 1e-4 * span)
+    return LawFit(p0, force - model(p0), s, bool(hit[3:].any()))
+
+
+def fit_polach(points: CriticalPoints) -> PolachFit:
+    """Eq. 9 fitted to one axle's critical points (seed 000 Table 4)."""
+    fit = fit_law(points)
+    if fit is None:
+        return PolachFit(float("nan"), float("nan"), float("nan"), float("nan"), len(points))
+    mu0, K, k_rozv = (float(x) for x in fit.params[:3])
+    return PolachFit(mu0, K, k_rozv, fit.rmse / float(np.mean(points.normal_N / 1e3)), len(points))

@@ -12,9 +12,9 @@ model on measured quantities and tests one equation:
   locked wheel's brake force is not known from its pressure). Sees gradient, resistance, pad
   friction, unmeasured brake forces, pressure lag, ground-speed sensor errors. Its floor is
   about the sensor noise.
-* **adhesion fit** (kN): the adhesion force from the wheelset equation (``adhesion_estimate``)
-  against the force of one Eq. 9 law, fitted to all axles, at each braked sample's measured
-  creepage. Sees position-dependent adhesion, load transfer, per-axle differences (cleaning).
+* **adhesion fit** (kN): the adhesion force at each critical point (``adhesion_estimate``)
+  against the force of one Eq. 9 law fitted to all axles' critical points. Sees
+  position-dependent adhesion, load transfer, per-axle differences (cleaning).
 * **coasting creep** (%): apparent creepage ``(V - v_i) / V`` of each axle while it is unbraked
   (the nominal model says 0). Sees wheel-radius errors and ground-speed sensor bias.
 """
@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from wsp_env.calibration.adhesion_estimate import eq9, estimate_adhesion, fit_polach
+from wsp_env.calibration.adhesion_estimate import CriticalPoints, estimate_adhesion, fit_law
 from wsp_env.calibration.traces import Trace
 
 MIN_SPEED_KMH = 10.0
@@ -112,30 +112,22 @@ def train_speed_balance(trace: Trace) -> Channel:
 
 
 def adhesion_fit(trace: Trace) -> Channel:
+    """Critical-point forces against one Eq. 9 law fitted to all axles' critical points; the
+    residual (kN) sits at each point's sample (``mask`` marks them). The RMSE is weighted by
+    each point's effective variance (``adhesion_estimate``)."""
     axles = estimate_adhesion(trace, min_speed_kmh=MIN_SPEED_KMH)
-    brake = brake_force_N(trace)
-    braked = (brake > 0.05 * brake.max()) & (trace.v_train_kmh[:, None] > MIN_SPEED_KMH)
-    # one shared Eq. 9 law from all axles' critical points
-    pooled = axles[0]
-    for a in axles[1:]:
-        pooled = type(pooled)(
-            np.concatenate([pooled.mu, a.mu]),
-            np.concatenate([pooled.creepage, a.creepage]),
-            np.concatenate([pooled.sliding_kmh, a.sliding_kmh]),
-            np.concatenate([pooled.force_N, a.force_N]),
-            np.concatenate([pooled.normal_N, a.normal_N]),
-            np.concatenate([pooled.critical, a.critical + len(pooled.mu)]),
-        )
-    law = fit_polach(pooled)
-    residual = np.zeros_like(brake)
-    for i, a in enumerate(axles):
-        model = eq9(a.creepage, a.sliding_kmh, law.mu0, law.K, law.K_rozv) * a.normal_N
-        residual[:, i] = (a.force_N - model) / 1e3
-    rmse = float(np.sqrt(np.mean(residual[braked] ** 2))) if braked.any() else float("nan")
+    pts = CriticalPoints.concatenate([a.points for a in axles])
+    fit = fit_law(pts)
+    residual = np.zeros_like(trace.p_cyl_bar)
+    mask = np.zeros(residual.shape, dtype=bool)
+    if fit is None:
+        return Channel("adhesion_fit", "kN", residual, mask, float("nan"))
+    residual[pts.sample, pts.axle] = fit.residual_kN
+    mask[pts.sample, pts.axle] = True
+    mu0, K, k_rozv = (float(x) for x in fit.params[:3])
     return Channel(
-        "adhesion_fit", "kN", residual, braked, rmse,
-        {"mu0": law.mu0, "K": law.K, "K_rozv": law.K_rozv},
-    )  # fmt: skip
+        "adhesion_fit", "kN", residual, mask, fit.rmse, {"mu0": mu0, "K": K, "K_rozv": k_rozv}
+    )
 
 
 def coasting_creep(trace: Trace) -> Channel:
