@@ -254,3 +254,15 @@ def test_two_effects_on_the_same_channel(tmp_path, grade, pad):
     assert set(found) == {"gradient", "pad_friction"}
     assert found["gradient"]["gradient_permille"] == pytest.approx(grade, abs=1.5)
     assert found["pad_friction"]["scale"] == pytest.approx(pad, abs=0.02)
+
+
+def test_export_orders_axle_factors_numerically():
+    """Vehicles with ten or more axles: axle_10_factor follows axle_9_factor, not axle_1."""
+    from wsp_env.calibration.discovery import Result, Step
+    from wsp_env.calibration.export import scenario_options
+
+    params = {"mu0": 0.08, "K": 30.0, "K_rozv": 0.03}
+    params.update({f"axle_{i}_factor": float(i) for i in range(2, 12)})
+    step = Step("adhesion_per_axle", "adhesion_per_axle", "adhesion_fit_kN", params, 1, 0.4, -50)
+    factors = scenario_options(Result({}, {}, added=[step]))["axle_mu_factor"]
+    assert factors == pytest.approx([i / 11.0 for i in [1, *range(2, 12)]])

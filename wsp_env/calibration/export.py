@@ -43,7 +43,8 @@ def scenario_options(result: Result) -> dict[str, Any]:
         elif step.category == "unmeasured_brake_force":
             opts["extra_brake_force_N"] = max(0.0, float(p["force_at_full_demand_N"]))
         elif step.category == "adhesion_per_axle":
-            factors = [1.0] + [float(v) for k, v in sorted(p.items()) if k.endswith("_factor")]
+            n = sum(1 for k in p if k.startswith("axle_") and k.endswith("_factor"))
+            factors = [1.0] + [float(p[f"axle_{i}_factor"]) for i in range(2, n + 2)]
             top = max(factors)
             opts["axle_mu_factor"] = [f / top for f in factors]
     return opts
