@@ -545,7 +545,7 @@ def discover(trace: Trace) -> Result:
             continue
         if isinstance(cand, str):  # adhesion effect
             adhesion[cand] = True
-            adh_rmse, adh_chi2 = rmse1, new
+            adh_rmse, adh_chi2 = rmse1, new  # an adhesion entry carries its chi2 in that slot
             cat = {"per_axle": "adhesion_per_axle", "load_transfer": "load_transfer",
                    "position": "adhesion_position"}[cand]  # fmt: skip
             step = Step(cat, cat, "adhesion_fit_kN", params, rmse0, rmse1, dbic)
