@@ -58,7 +58,7 @@ def test_polach_parameters_recovered_within_10_percent(tmp_path, sensors):
     assert fit is not None and not fit.at_bound
     np.testing.assert_allclose(fit.params[:3], [MU0, K, K_ROZV], rtol=0.10)
     assert 5.0 < fit.params[3] < 9.0
-    fits = [fit_polach(a.points) for a in estimate_adhesion(trace)]
+    fits = [fit_polach(a) for a in estimate_adhesion(trace)]
     assert fits[0].mu0 > fits[1].mu0 and fits[2].mu0 > fits[3].mu0  # the pitch pattern
     for f in fits:
         assert f.n_points >= 10 and abs(f.K / K - 1) < 0.15
@@ -79,7 +79,7 @@ def test_soap_cleaning_shows_in_the_fitted_mu0_oil_does_not(tmp_path, seed):
             tmp_path / rail, load_rail(rail), 120.0, sensors=sensors, seed=seed,
             mu_contaminated=mu, pattern="uniform",
         )  # fmt: skip
-        m = [f.mu0 for f in (fit_polach(a.points) for a in estimate_adhesion(read_trace(csv_path)))]
+        m = [f.mu0 for f in (fit_polach(a) for a in estimate_adhesion(read_trace(csv_path)))]
         ratios[rail] = (m[2] + m[3]) / (m[0] + m[1])
     assert ratios["soap"] > 1.05
     assert ratios["oil"] < 1.02

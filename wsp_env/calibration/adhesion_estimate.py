@@ -42,6 +42,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.integrate import cumulative_trapezoid
 from scipy.optimize import least_squares
 from scipy.signal import savgol_filter
 
@@ -59,18 +60,15 @@ REWEIGHT = 2
 class CriticalPoints:
     """Critical points (of one axle, or pooled), one entry per point.
 
-    ``sample`` is the sample index in the trace; ``turning`` is True for creepage turning
-    points, False for low-sliding points; ``sigma_force_N`` / ``sigma_creepage`` are the
-    standard errors of the force and creepage estimates (module docstring).
+    ``sample`` is the sample index in the trace, ``axle`` the axle index (0 = leading);
+    ``position_m`` the distance the train has run; ``sigma_force_N`` / ``sigma_creepage`` are
+    the standard errors of the force and creepage estimates (module docstring).
     """
 
-    time_s: np.ndarray
     sample: np.ndarray
     axle: np.ndarray
-    turning: np.ndarray
     creepage: np.ndarray
     sliding_kmh: np.ndarray
-    speed_kmh: np.ndarray
     position_m: np.ndarray
     force_N: np.ndarray
     normal_N: np.ndarray
@@ -83,7 +81,7 @@ class CriticalPoints:
         return self.force_N / self.normal_N
 
     def __len__(self) -> int:
-        return int(self.time_s.size)
+        return int(self.sample.size)
 
     def select(self, keep: np.ndarray) -> CriticalPoints:
         return CriticalPoints(*(getattr(self, f.name)[keep] for f in dataclasses.fields(self)))
@@ -92,19 +90,6 @@ class CriticalPoints:
     def concatenate(parts: list[CriticalPoints]) -> CriticalPoints:
         names = [f.name for f in dataclasses.fields(CriticalPoints)]
         return CriticalPoints(*(np.concatenate([getattr(p, n) for p in parts]) for n in names))
-
-
-@dataclass
-class AxleAdhesion:
-    """Per-sample estimates for one axle (arrays over the trace's samples, for plots; the
-    per-sample force uses a Savitzky–Golay wheel deceleration) and its critical points."""
-
-    mu: np.ndarray
-    creepage: np.ndarray
-    sliding_kmh: np.ndarray
-    force_N: np.ndarray
-    normal_N: np.ndarray
-    points: CriticalPoints
 
 
 @dataclass
@@ -118,18 +103,16 @@ class PolachFit:
     n_points: int
 
 
-def _uniform_filter(t: np.ndarray, y: np.ndarray, window_s: float, deriv: int) -> np.ndarray:
-    """Savitzky–Golay smoothing (``deriv=0``) or derivative (``1``) on a uniform resampling."""
+def _uniform_derivative(t: np.ndarray, y: np.ndarray, window_s: float) -> np.ndarray:
+    """d y / d t by a Savitzky–Golay filter on a uniform resampling of ``t``."""
     dt = float(np.median(np.diff(t)))
     grid = np.arange(t[0], t[-1] + 0.5 * dt, dt)
     yg = np.interp(grid, t, y)
     win = max(5, round(window_s / dt) | 1)  # odd
     win = min(win, len(grid) if len(grid) % 2 else len(grid) - 1)
     if win <= 3:
-        out = np.gradient(yg, dt) if deriv else yg
-    else:
-        out = savgol_filter(yg, win, polyorder=2, deriv=deriv, delta=dt)
-    return np.interp(t, grid, out)
+        return np.interp(t, grid, np.gradient(yg, dt))
+    return np.interp(t, grid, savgol_filter(yg, win, polyorder=2, deriv=1, delta=dt))
 
 
 def noise_std(y: np.ndarray) -> float:
@@ -144,7 +127,7 @@ def train_deceleration(trace: Trace, smooth_s: float = 1.0) -> np.ndarray:
     present, else a Savitzky–Golay derivative of the (smooth) train speed."""
     if "a_train_mps2" in trace.optional:
         return np.asarray(trace.optional["a_train_mps2"], dtype=float)
-    return -_uniform_filter(trace.time_s, trace.v_train_kmh / 3.6, smooth_s, 1)
+    return -_uniform_derivative(trace.time_s, trace.v_train_kmh / 3.6, smooth_s)
 
 
 def normal_loads(trace: Trace, decel: np.ndarray) -> np.ndarray:
@@ -164,13 +147,8 @@ def normal_loads(trace: Trace, decel: np.ndarray) -> np.ndarray:
     return np.maximum(out, 0.05 * static)
 
 
-def _distance_m(trace: Trace) -> np.ndarray:
-    v = trace.v_train_kmh / 3.6
-    return np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(trace.time_s))])
-
-
-def estimate_adhesion(trace: Trace, min_speed_kmh: float = 20.0) -> list[AxleAdhesion]:
-    """Seed 000 §3 estimation for every axle of ``trace`` (see the module docstring)."""
+def estimate_adhesion(trace: Trace, min_speed_kmh: float = 20.0) -> list[CriticalPoints]:
+    """Seed 000 §3: the critical points of every axle of ``trace`` (module docstring)."""
     veh = trace.vehicle
     brake = veh.get("brake", {})
     gain = float(brake.get("torque_gain_Nm_per_bar", 0.0))
@@ -181,14 +159,13 @@ def estimate_adhesion(trace: Trace, min_speed_kmh: float = 20.0) -> list[AxleAdh
     v = trace.v_train_kmh / 3.6
     decel = train_deceleration(trace)
     normal = normal_loads(trace, decel)
-    x_m = _distance_m(trace)
+    x_m = cumulative_trapezoid(v, t, initial=0.0)
     sigma_v = max(noise_std(trace.v_train_kmh), SPEED_RESOLUTION_KMH) / 3.6
     sigma_p = noise_std(trace.p_cyl_bar)
     out = []
     for i in range(trace.n_axles):
         wheel = trace.v_axle_kmh[:, i] / 3.6
         torque = gain * np.maximum(0.0, trace.p_cyl_bar[:, i] - p_th)
-        force = (torque + inertia * _uniform_filter(t, wheel, 0.5, 1) / r) / r
         slide = v - wheel
         creep = np.where(v > 1.0, slide / np.maximum(v, 1.0), 0.0)
         # turning points whose parabola vertex (uniform-grid form) lies near the sample
@@ -215,13 +192,10 @@ def estimate_adhesion(trace: Trace, min_speed_kmh: float = 20.0) -> list[AxleAdh
             inertia * np.sqrt(2.0) * sigma_v / (r * r * span), gain * sigma_p / r
         )  # fmt: skip
         pts = CriticalPoints(
-            time_s=t[k],
             sample=k,
             axle=np.full(k.size, i),
-            turning=turning[k],
             creepage=creep[k],
             sliding_kmh=3.6 * slide[k],
-            speed_kmh=3.6 * v[k],
             position_m=x_m[k],
             force_N=fk,
             normal_N=normal[k, i],
@@ -231,13 +205,17 @@ def estimate_adhesion(trace: Trace, min_speed_kmh: float = 20.0) -> list[AxleAdh
         )
         keep = (
             (torque[k] > 0.05 * gain)
-            & (pts.speed_kmh > min_speed_kmh)
+            & (v[k] * 3.6 > min_speed_kmh)
             & (pts.force_N > 0)
             & (pts.creepage >= 0)
         )
-        pts = pts.select(keep)
-        out.append(AxleAdhesion(force / normal[:, i], creep, 3.6 * slide, force, normal[:, i], pts))
+        out.append(pts.select(keep))
     return out
+
+
+def pooled_points(trace: Trace, min_speed_kmh: float = 20.0) -> CriticalPoints:
+    """Every axle's critical points in one set (``axle`` tells them apart)."""
+    return CriticalPoints.concatenate(estimate_adhesion(trace, min_speed_kmh))
 
 
 def eq9(xi: np.ndarray, dv_kmh: np.ndarray, mu0: float, K: float, k_rozv: float) -> np.ndarray:

@@ -50,14 +50,16 @@ import numpy as np
 from wsp_env.calibration.adhesion_estimate import (
     CriticalPoints,
     LawFit,
-    estimate_adhesion,
     fit_law,
+    noise_std,
+    pooled_points,
 )
 from wsp_env.calibration.residuals import (
     MIN_SPEED_KMH,
     balance_intervals,
     brake_force_N,
     channels,
+    coasting_creep,
     masked_cumdiff,
     masked_cumtrapz,
 )
@@ -205,7 +207,7 @@ def _fit_sensor_balance(trace, residual, mask):
     drop = -masked_cumdiff(trace.v_train_kmh, balance_intervals(trace))
     coef, res = _linear(residual, mask, [drop])
     s = -coef[0]
-    coasting = channels(trace)["coasting_creep_pct"]
+    coasting = coasting_creep(trace)
     if coasting.mask.any():
         observed = coasting.residual[coasting.mask]
         se = observed.std() / math.sqrt(observed.size) + 0.02
@@ -289,14 +291,18 @@ def _axle_offsets_m(trace: Trace) -> np.ndarray:
 
 
 def fit_adhesion_model(
-    trace: Trace, per_axle: bool, load_transfer: bool, step_m: float | None = None
+    trace: Trace,
+    per_axle: bool,
+    load_transfer: bool,
+    step_m: float | None = None,
+    pts: CriticalPoints | None = None,
 ) -> LawFit | None:
-    """One Eq. 9 law for all axles' critical points, times the chosen extensions' factors:
-    a friction factor per axle (axle 1 = 1), a bogie-pitch load transfer ``+- k a`` on the
-    leading / trailing axle of each bogie (consecutive pairs), a friction factor on the rail
-    beyond ``step_m`` (position of the rail under the axle)."""
-    axles = estimate_adhesion(trace, min_speed_kmh=MIN_SPEED_KMH)
-    pts = CriticalPoints.concatenate([a.points for a in axles])
+    """One Eq. 9 law for all axles' critical points (``pts``, default: the trace's), times the
+    chosen extensions' factors: a friction factor per axle (axle 1 = 1), a bogie-pitch load
+    transfer ``+- k a`` on the leading / trailing axle of each bogie (consecutive pairs), a
+    friction factor on the rail beyond ``step_m`` (position of the rail under the axle)."""
+    if pts is None:
+        pts = pooled_points(trace, MIN_SPEED_KMH)
     if len(pts) < 10:
         return None
     n_ax = trace.n_axles - 1
@@ -331,34 +337,19 @@ def fit_adhesion_model(
 
 
 def fit_adhesion_step(
-    trace: Trace, per_axle: bool, load_transfer: bool
+    trace: Trace, per_axle: bool, load_transfer: bool, pts: CriticalPoints
 ) -> tuple[LawFit | None, float]:
     """The adhesion model with a friction step on the rail, the step's position chosen on a
     grid of the critical points' positions (best weighted fit)."""
-    axles = estimate_adhesion(trace, min_speed_kmh=MIN_SPEED_KMH)
-    x = np.concatenate([a.points.position_m for a in axles])
+    x = pts.position_m
     if x.size < 10:
         return None, float("nan")
     best: tuple[LawFit | None, float] = (None, float("nan"))
     for step_m in x.min() + STEP_FRACTIONS * (x.max() - x.min()):
-        fit = fit_adhesion_model(trace, per_axle, load_transfer, float(step_m))
+        fit = fit_adhesion_model(trace, per_axle, load_transfer, float(step_m), pts)
         if fit is not None and (best[0] is None or fit.chi2 < best[0].chi2):
             best = (fit, float(step_m))
     return best
-
-
-def adhesion_channel_rmse(
-    trace: Trace, per_axle: bool = False, load_transfer: bool = False, position: bool = False
-) -> tuple[float, np.ndarray | None]:
-    """Weighted RMSE (kN) and parameters of the adhesion model with the chosen extensions;
-    parameters ``None`` when one runs to a bound (not identified by the data)."""
-    if position:
-        fit, _ = fit_adhesion_step(trace, per_axle, load_transfer)
-    else:
-        fit = fit_adhesion_model(trace, per_axle, load_transfer)
-    if fit is None:
-        return float("nan"), None
-    return fit.rmse, (None if fit.at_bound else fit.params)
 
 
 CANDIDATES_BALANCE = [
@@ -387,12 +378,6 @@ CANDIDATES_COASTING = [
 ]
 
 
-def _noise_floor_kmh(trace: Trace) -> float:
-    """Speed-sensor noise from second differences of the logged train speed."""
-    d2 = np.diff(trace.v_train_kmh, 2)
-    return float(np.median(np.abs(d2)) / 0.6745 / math.sqrt(6.0))
-
-
 def _channel_of(cand: Any) -> str:
     if isinstance(cand, tuple):
         return "train_speed_balance_kmh"
@@ -411,20 +396,17 @@ def discover(trace: Trace) -> Result:
     before = {k: c.rmse for k, c in chans.items()}
     result = Result(errors_before=before, errors_after=dict(before))
     sampling = chans["train_speed_balance_kmh"].detail.get("sampling_rmse", 0.0)
+    speed_noise = noise_std(trace.v_train_kmh)
     floors = {
-        "train_speed_balance_kmh": math.hypot(_noise_floor_kmh(trace), sampling),
-        "coasting_creep_pct": 100.0
-        * _noise_floor_kmh(trace)
-        / max(float(np.median(trace.v_train_kmh)), 1.0),
+        "train_speed_balance_kmh": math.hypot(speed_noise, sampling),
+        "coasting_creep_pct": 100.0 * speed_noise / max(float(np.median(trace.v_train_kmh)), 1.0),
     }
     residual = {k: chans[k].residual.copy() for k in floors}
     masks = {k: chans[k].mask for k in floors}
     adhesion = {"per_axle": False, "load_transfer": False, "position": False}
-    base_fit = fit_adhesion_model(trace, False, False)
-    adh_rmse = base_fit.rmse if base_fit is not None else float("nan")
-    adh_chi2 = base_fit.chi2 if base_fit is not None else float("nan")
-    result.errors_before["adhesion_fit_kN"] = adh_rmse
-    result.errors_after["adhesion_fit_kN"] = adh_rmse
+    points = pooled_points(trace, MIN_SPEED_KMH)  # shared by every adhesion candidate
+    adh_rmse = chans["adhesion_fit_kN"].rmse
+    adh_chi2 = chans["adhesion_fit_kN"].detail.get("chi2", float("nan"))
     used: set[str] = set()
     for _ in range(MAX_EFFECTS):
         qualified: list[tuple] = []
@@ -494,9 +476,13 @@ def discover(trace: Trace) -> Result:
             trial = dict(adhesion, **{key: True})
             step_m = float("nan")
             if trial["position"]:
-                fit, step_m = fit_adhesion_step(trace, trial["per_axle"], trial["load_transfer"])
+                fit, step_m = fit_adhesion_step(
+                    trace, trial["per_axle"], trial["load_transfer"], points
+                )
             else:
-                fit = fit_adhesion_model(trace, trial["per_axle"], trial["load_transfer"])
+                fit = fit_adhesion_model(
+                    trace, trial["per_axle"], trial["load_transfer"], None, points
+                )
             if fit is None or fit.at_bound:  # not identified (a parameter ran to its bound)
                 continue
             rmse1, x, n = fit.rmse, fit.params, fit.residual_kN.size

@@ -53,7 +53,7 @@ def scenario_options(result: Result) -> dict[str, Any]:
 def export_config(path: str | Path, trace: Trace, result: Result) -> tuple[Path, Path]:
     """Write ``PATH`` (rail table) and ``PATH.options.yaml`` (reset options)."""
     target = Path(path)
-    fits = [fit_polach(a.points) for a in estimate_adhesion(trace)]
+    fits = [fit_polach(a) for a in estimate_adhesion(trace)]
     ok = [f for f in fits if np.isfinite(f.mu0)]
     if not ok:
         raise ValueError(f"{trace.path}: too few critical points to fit an adhesion law")
@@ -145,8 +145,8 @@ def _build(out: Path, trace: Trace, result: Result) -> None:
     xi = np.linspace(0.0, 0.4, 100)
     v_ref = float(np.median(trace.v_train_kmh))
     for i, a in enumerate(axles):
-        f = fit_polach(a.points)
-        line = ax.plot(a.points.creepage, a.points.mu, ".", alpha=0.5, label=f"axle {i + 1}")[0]
+        f = fit_polach(a)
+        line = ax.plot(a.creepage, a.mu, ".", alpha=0.5, label=f"axle {i + 1}")[0]
         if np.isfinite(f.mu0):
             ax.plot(xi, eq9(xi, xi * v_ref, f.mu0, f.K, f.K_rozv), color=line.get_color())
         table.append(

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from wsp_env.calibration.adhesion_estimate import CriticalPoints, estimate_adhesion, fit_law
+from wsp_env.calibration.adhesion_estimate import fit_law, pooled_points
 from wsp_env.calibration.traces import Trace
 
 MIN_SPEED_KMH = 10.0
@@ -43,10 +43,6 @@ class Channel:
     mask: np.ndarray
     rmse: float
     detail: dict[str, float] = field(default_factory=dict)
-
-
-def _cumtrapz(t: np.ndarray, y: np.ndarray) -> np.ndarray:
-    return np.concatenate([[0.0], np.cumsum(0.5 * (y[1:] + y[:-1]) * np.diff(t))])
 
 
 def brake_force_N(trace: Trace) -> np.ndarray:
@@ -115,8 +111,7 @@ def adhesion_fit(trace: Trace) -> Channel:
     """Critical-point forces against one Eq. 9 law fitted to all axles' critical points; the
     residual (kN) sits at each point's sample (``mask`` marks them). The RMSE is weighted by
     each point's effective variance (``adhesion_estimate``)."""
-    axles = estimate_adhesion(trace, min_speed_kmh=MIN_SPEED_KMH)
-    pts = CriticalPoints.concatenate([a.points for a in axles])
+    pts = pooled_points(trace, MIN_SPEED_KMH)
     fit = fit_law(pts)
     residual = np.zeros_like(trace.p_cyl_bar)
     mask = np.zeros(residual.shape, dtype=bool)
@@ -125,9 +120,8 @@ def adhesion_fit(trace: Trace) -> Channel:
     residual[pts.sample, pts.axle] = fit.residual_kN
     mask[pts.sample, pts.axle] = True
     mu0, K, k_rozv = (float(x) for x in fit.params[:3])
-    return Channel(
-        "adhesion_fit", "kN", residual, mask, fit.rmse, {"mu0": mu0, "K": K, "K_rozv": k_rozv}
-    )
+    detail = {"mu0": mu0, "K": K, "K_rozv": k_rozv, "chi2": fit.chi2}
+    return Channel("adhesion_fit", "kN", residual, mask, fit.rmse, detail)
 
 
 def coasting_creep(trace: Trace) -> Channel:
