@@ -1,0 +1,202 @@
+"""Print the calibration loop's measured figures that the tests do not assert — the README's and
+the closing notes' numbers on the adhesion channel.
+
+    .venv/bin/python scripts/calibration_figures.py            # about 1 minute
+
+1. Force at the critical points against the simulator's own adhesion force (Eq. 9 rail, no
+   recovery or cleaning, no sensor noise), next to the per-sample estimate with a
+   Savitzky–Golay wheel deceleration that the critical points replace.
+2. The adhesion channel's floor on traces without an injected effect, and the largest cut any
+   adhesion candidate reaches there (the 1/3 bar of ``discovery.MIN_REDUCTION_ADHESION``).
+3. Injected effects (a gradient; adhesion effects on soap, where the floor is higher, and on
+   oil): the effect named first, its parameters and the cut of its channel.
+4. Runtime of ``wsp-env calibrate --json --report --export`` on a ~60 s, 4-axle, 10 Hz trace
+   (median of 3, in-process: without the interpreter's start-up and imports).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import io
+import math
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+from scipy.signal import savgol_filter
+
+import wsp_env.env as env_module
+from wsp_env.calibration.adhesion_estimate import estimate_adhesion
+from wsp_env.calibration.discovery import discover
+from wsp_env.calibration.synthetic import simulate_trace
+from wsp_env.calibration.traces import read_trace
+from wsp_env.cli import main as cli_main
+from wsp_env.config import load_rail
+from wsp_env.physics import layout as L
+from wsp_env.trace_io import SensorModel
+
+NOISY = SensorModel(sample_period_s=0.1, speed_noise_kmh=0.1, pressure_noise_bar=0.01)
+
+
+def _true_forces(run):
+    """Run ``run()`` while recording env 0's per-axle adhesion force after every control step."""
+    log: list[tuple[float, np.ndarray]] = []
+    original = env_module._BrakingCore.step
+
+    def step(self, actions):
+        original(self, actions)
+        log.append((float(self.sim.time_s[0]), self.sim.axle_state[0, :, L.AS_F].copy()))
+
+    env_module._BrakingCore.step = step
+    try:
+        out = run()
+    finally:
+        env_module._BrakingCore.step = original
+    t = np.array([row[0] for row in log])
+    return out, t, np.array([row[1] for row in log])
+
+
+def force_estimate(directory: Path) -> None:
+    rail = dataclasses.replace(
+        load_rail("oil"),
+        law_params={"K": 30.0, "K_rozv_per_kmh": 0.03},
+        clean_energy_J_per_m=math.inf,
+        pass_removal=0.0,
+    )
+    print("1. adhesion force estimate vs the simulator's force (uic_z1, 120 km/h, Eq. 9 rail)")
+    for period in (0.1, 0.02):
+        sensors = SensorModel(sample_period_s=period)
+        (csv_path, _, _), t_true, f_true = _true_forces(
+            lambda s=sensors, p=period: simulate_trace(
+                directory / f"force_{p}",
+                rail,
+                120.0,
+                sensors=s,
+                mu_contaminated=0.08,
+                pattern="uniform",
+            )
+        )
+        trace = read_trace(csv_path)
+        t = trace.time_s
+        errors, errors_sg = [], []
+        veh = trace.vehicle
+        r, inertia = float(veh["wheel_radius_m"]), float(veh["wheelset_inertia_kgm2"])
+        gain = float(veh["brake"]["torque_gain_Nm_per_bar"])
+        p_th = float(veh["brake"]["p_threshold_bar"])
+        for pts in estimate_adhesion(trace, min_speed_kmh=10.0):
+            i = int(pts.axle[0]) if len(pts) else 0
+            truth = np.interp(t[pts.sample], t_true, f_true[:, i])
+            errors.append(pts.force_N - truth)
+            # the per-sample estimate: wheelset equation with a 0.5 s Savitzky–Golay derivative
+            wheel = trace.v_axle_kmh[:, i] / 3.6
+            win = max(5, round(0.5 / period) | 1)
+            acc = savgol_filter(wheel, win, polyorder=2, deriv=1, delta=period)
+            torque = gain * np.maximum(0.0, trace.p_cyl_bar[:, i] - p_th)
+            braked = (torque > 0.05 * gain) & (trace.v_train_kmh > 10.0)
+            sg = (torque + inertia * acc / r) / r
+            errors_sg.append(sg[braked] - np.interp(t[braked], t_true, f_true[:, i]))
+        rms = float(np.sqrt(np.mean(np.concatenate(errors) ** 2))) / 1e3
+        rms_sg = [float(np.sqrt(np.mean(e**2))) / 1e3 for e in errors_sg]
+        print(
+            f"   {1 / period:.0f} Hz: critical points {rms:.3f} kN rms "
+            f"({sum(e.size for e in errors)} points); per-sample Savitzky–Golay "
+            f"{min(rms_sg):.2f}-{max(rms_sg):.2f} kN rms per axle"
+        )
+
+
+def _discover(directory: Path, name: str, rail, seed=0, speed=120.0, **effect):
+    effect.setdefault("mu_contaminated", 0.08)
+    csv_path, _, _ = simulate_trace(
+        directory / name, rail, speed, sensors=NOISY, seed=seed, pattern="uniform", **effect
+    )
+    return discover(read_trace(csv_path))
+
+
+def _adhesion_cuts(result) -> dict[str, float]:
+    return {
+        row["name"]: 1.0 - row["after"] / row["before"]
+        for row in result.considered
+        if row["channel"] == "adhesion_fit_kN"
+    }
+
+
+def floors(directory: Path) -> None:
+    soap = load_rail("soap")
+    uncleaned = dataclasses.replace(soap, clean_energy_J_per_m=math.inf, pass_removal=0.0)
+    print("2. adhesion channel without an injected effect (10 Hz, 0.1 km/h noise)")
+    cases = [
+        ("soap, no cleaning", uncleaned, 0, 120.0),
+        ("soap, no cleaning", uncleaned, 1, 100.0),
+        ("soap, no cleaning", uncleaned, 2, 140.0),
+        ("soap with cleaning", soap, 0, 120.0),
+        ("soap with cleaning", soap, 2, 140.0),
+        ("oil", load_rail("oil"), 0, 120.0),
+    ]
+    for label, rail, seed, speed in cases:
+        mu = 0.06 if label == "oil" else 0.08
+        res = _discover(directory, "floor", rail, seed, speed, mu_contaminated=mu)
+        cuts = _adhesion_cuts(res)
+        best = max(cuts, key=cuts.get) if cuts else "-"
+        print(
+            f"   {label:19s} seed {seed} {speed:5.0f} km/h: floor "
+            f"{res.errors_before['adhesion_fit_kN']:.2f} kN; best candidate {best} "
+            f"{100 * cuts.get(best, 0.0):.0f} %; added {[s.category for s in res.added]}"
+        )
+    print("3. injected effects: the first effect added, its parameters and its channel's cut")
+    step = ((0.0, 500.0, 0.667), (500.0, 5000.0, 1.0))  # mu ~0.107 to 500 m, then 0.06
+    ratios = {"axle_mu_factor": (0.6, 0.75, 0.9, 1.0)}
+    oil = load_rail("oil")
+    injected = (
+        ("soap, gradient -15 permille", uncleaned, {"gradient_permille": -15.0}),
+        ("soap, R_i 0.6/0.75/0.9/1", uncleaned, ratios),
+        ("soap, friction step at 500 m", uncleaned, {"sections": step, "mu_contaminated": 0.06}),
+        ("oil, R_i 0.6/0.75/0.9/1", oil, {**ratios, "mu_contaminated": 0.06}),
+        ("oil, CoG/pivot heights x4", oil, {"height_scale": 4.0, "mu_contaminated": 0.06}),
+        ("oil, friction step at 500 m", oil, {"sections": step, "mu_contaminated": 0.06}),
+    )
+    for label, rail, effect in injected:
+        res = _discover(directory, "effect", rail, **effect)
+        if not res.added:
+            print(f"   {label:30s}: nothing added")
+            continue
+        first = res.added[0]
+        shown = {k: round(float(v), 3) for k, v in first.parameters.items()}
+        print(
+            f"   {label:30s}: {first.category} on {first.channel} {first.before:.3f} -> "
+            f"{first.after:.3f} ({100 * (1 - first.after / first.before):.0f} % cut) {shown}"
+        )
+
+
+def runtime(directory: Path) -> None:
+    csv_path, _, _ = simulate_trace(
+        directory / "runtime", load_rail("soap"), 160.0, sensors=NOISY, mu_contaminated=0.08,
+        pattern="uniform", gradient_permille=-10.0,
+    )  # fmt: skip
+    trace = read_trace(csv_path)
+    args = ["calibrate", str(csv_path), "--json", str(directory / "cal.json")]
+    args += ["--report", str(directory / "report"), "--export", str(directory / "cal.yaml")]
+    times = []
+    for _ in range(3):
+        t0 = time.perf_counter()
+        with contextlib.redirect_stdout(io.StringIO()):
+            cli_main(args)
+        times.append(time.perf_counter() - t0)
+    print(
+        f"4. calibrate with report and export, {trace.time_s[-1]:.0f} s / {trace.n_axles} axles / "
+        f"{len(trace.time_s)} samples: {statistics.median(times):.2f} s (median of 3)"
+    )
+
+
+def main() -> None:
+    with tempfile.TemporaryDirectory() as tmp:
+        directory = Path(tmp)
+        force_estimate(directory)
+        floors(directory)
+        runtime(directory)
+
+
+if __name__ == "__main__":
+    main()
