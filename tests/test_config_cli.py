@@ -143,3 +143,27 @@ def test_simulate_same_seed_same_result(tmp_path):
     assert (
         json.loads(a.read_text())["mu_contaminated"] != json.loads(c.read_text())["mu_contaminated"]
     )
+
+
+def test_simulate_runs_the_wsp_policies_on_the_evaluation_path(tmp_path):
+    """--policy takes the evaluation's policy names (DESIGN §8): on the same seed, the
+    classical WSP and the oracle keep the wheels from locking that full demand locks, and the
+    stop matches ``wsp-env evaluate``'s code path (one run of a suite)."""
+    from wsp_env.policy import make_policy
+    from wsp_env.runner import run_one
+
+    results = {}
+    for policy in ("none", "classical", "oracle"):
+        out = tmp_path / f"{policy}.json"
+        args = ["simulate", "--policy", policy, "--seed", "2", "--speed-kmh", "100"]
+        assert main([*args, "--mu-contaminated", "0.07", "--json", str(out)]) == 0
+        results[policy] = json.loads(out.read_text())
+    assert results["none"]["max_lock_s"] > 5.0
+    for policy in ("classical", "oracle"):
+        assert results[policy]["policy"] == policy
+        assert results[policy]["max_lock_s"] < 1.0
+        assert results[policy]["sliding_energy_kJ"] < 0.5 * results["none"]["sliding_energy_kJ"]
+    run, _ = run_one(
+        "uic_z1", "soap", 100.0, make_policy("classical"), 2, {"mu_contaminated": 0.07}
+    )
+    assert run["stopping_distance_m"] == results["classical"]["stopping_distance_m"]

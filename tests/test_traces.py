@@ -11,20 +11,20 @@ import numpy as np
 import pytest
 
 from wsp_env.calibration.traces import TraceError, read_trace
-from wsp_env.config import load_rail, load_vehicle
-from wsp_env.runner import run_stop, trace_metadata
-from wsp_env.simulator import RunSetup
+from wsp_env.config import load_vehicle
+from wsp_env.policy import NoWSP
+from wsp_env.runner import run_one, trace_metadata
 from wsp_env.trace_io import SensorModel, sample_run, write_trace
 
 
 @pytest.fixture(scope="module")
 def trace_dir(tmp_path_factory) -> Path:
     veh = load_vehicle("uic_z1")
-    setup = RunSetup(80.0, load_rail("soap"), rail_name="soap")
-    _, record = run_stop(veh, setup)
+    case = {"mu_contaminated": 0.08, "pattern": "uniform"}
+    run, record = run_one(veh, "soap", 80.0, NoWSP(), 0, case)
     cols = sample_run(record, SensorModel(sample_period_s=0.1, speed_noise_kmh=0.1),
                       np.random.default_rng(0))  # fmt: skip
-    meta = trace_metadata(veh, setup, "soap", 0.1, "fixture")
+    meta = trace_metadata(veh, run["conditions"], "soap", 0.1, "fixture")
     d = tmp_path_factory.mktemp("traces")
     write_trace(d / "good", cols, meta)
     return d

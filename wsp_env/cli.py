@@ -86,7 +86,12 @@ def _add_simulate(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--speed-kmh", type=_positive, default=120.0, help="initial speed (120)")
     p.add_argument("--rail", default="soap", choices=RAILS, help="rail condition (soap)")
     p.add_argument("--rails-config", default=None, help="rail-condition table (YAML)")
-    p.add_argument("--policy", default="none", help="valve policy: none = full demand, no WSP")
+    p.add_argument(
+        "--policy",
+        default="none",
+        help="none (full demand, no WSP), classical, oracle, or a trained model file (none)",
+    )
+    p.add_argument("--wsp-config", default=None, help="classical WSP parameters (YAML)")
     p.add_argument("--seed", type=int, default=0, help="draws adhesion level and pattern (0)")
     p.add_argument("--mu-contaminated", type=_positive, default=None, help="fix the level")
     p.add_argument(
@@ -104,8 +109,8 @@ def _add_simulate(sub: argparse._SubParsersAction) -> None:
 
 
 def cmd_simulate(args: argparse.Namespace) -> dict[str, Any]:
-    from wsp_env.runner import PHYSICS_POLICIES, run_stop, trace_metadata
-    from wsp_env.simulator import draw_run_setup
+    from wsp_env.policy import make_policy
+    from wsp_env.runner import run_one, trace_metadata
     from wsp_env.trace_io import SensorModel, sample_run, write_trace
 
     vehicle = load_vehicle(args.vehicle)
@@ -114,36 +119,33 @@ def cmd_simulate(args: argparse.Namespace) -> dict[str, Any]:
             f"--speed-kmh: {args.speed_kmh:g} exceeds {vehicle.id}'s maximum "
             f"{vehicle.max_speed_kmh:g} km/h"
         )
-    if args.policy not in PHYSICS_POLICIES:
-        raise UserError(f"--policy: unknown policy {args.policy!r} (available: none)")
-    rail = load_rail(args.rail, args.rails_config)
-    rng = np.random.default_rng(args.seed)
-    fixed: dict[str, Any] = {
-        "demand_fraction": 1.0 if args.demand == "emergency" else 0.85,
-        "rail_name": args.rail,
-    }
+    load_rail(args.rail, args.rails_config)  # a bad table or rail fails here, named
+    try:
+        policy = make_policy(args.policy, args.wsp_config)
+    except FileNotFoundError as err:
+        raise UserError(f"--policy: {err}") from None
+    case: dict[str, Any] = {"demand": args.demand}
     if args.pattern is not None:
-        rail = _with_pattern(rail, args.pattern)
-    setup = draw_run_setup(rail, rng, args.speed_kmh, **fixed)
+        case["pattern"] = args.pattern
     if args.mu_contaminated is not None:
-        import dataclasses
-
-        setup = dataclasses.replace(setup, mu_contaminated=args.mu_contaminated)
-    metrics, record = run_stop(vehicle, setup, args.policy, dt_s=args.dt_s)
+        case["mu_contaminated"] = args.mu_contaminated
+    env_kwargs = {"substep_s": args.dt_s, "rails_config": args.rails_config}
+    run, record = run_one(vehicle, args.rail, args.speed_kmh, policy, args.seed, case, env_kwargs)
+    conditions = run["conditions"]
     result = {
         "vehicle": vehicle.id,
         "rail": args.rail,
-        "policy": args.policy,
+        "policy": policy.name,
         "seed": args.seed,
-        "mu_contaminated": setup.mu_contaminated,
-        "pattern_sections": [list(s) for s in setup.sections],
-        **metrics,
+        "mu_contaminated": conditions["mu_contaminated"],
+        "pattern_sections": conditions["sections"],
+        **{k: v for k, v in run.items() if k not in ("scenario", "seed", "policy", "conditions")},
     }
     outputs = []
     if args.plot:
         from wsp_env.plotting import plot_run
 
-        title = f"{vehicle.name}, {args.speed_kmh:g} km/h, {args.rail}, policy {args.policy}"
+        title = f"{vehicle.name}, {args.speed_kmh:g} km/h, {args.rail}, policy {policy.name}"
         outputs.append(plot_run(record, args.plot, title=title))
     if args.trace:
         sensors = SensorModel(
@@ -154,7 +156,7 @@ def cmd_simulate(args: argparse.Namespace) -> dict[str, Any]:
         columns = sample_run(record, sensors, np.random.default_rng([args.seed, 1]))
         meta = trace_metadata(
             vehicle,
-            setup,
+            conditions,
             args.rail,
             args.sample_period_s,
             f"simulated {vehicle.id} {args.rail} {args.speed_kmh:g} km/h seed {args.seed}",
@@ -162,12 +164,6 @@ def cmd_simulate(args: argparse.Namespace) -> dict[str, Any]:
         outputs.extend(write_trace(args.trace, columns, meta))
     result["outputs"] = [str(p) for p in outputs]
     return result
-
-
-def _with_pattern(rail: Any, pattern: str) -> Any:
-    import dataclasses
-
-    return dataclasses.replace(rail, patterns={pattern: 1.0})
 
 
 def _print_simulate(result: dict[str, Any]) -> None:

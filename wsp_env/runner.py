@@ -1,76 +1,67 @@
-"""Run one braking stop on ``TrainSim`` with a fixed valve policy, recording it like a logger.
+"""Run one braking stop with any policy, recording it like a logger, and describe it as a trace.
 
-Used by ``wsp-env simulate``. The policy here is the physics-level one: ``none`` keeps every
-valve in *apply* (full demand, no WSP). Learned and classical WSP policies act through the
-Gymnasium environment instead.
+``run_one`` is a one-run suite on the evaluation's code path (``evaluation.run_suite``): the same
+environment core, policy interface and metrics as ``wsp-env evaluate``. Used by
+``wsp-env simulate`` and the calibration's synthetic traces.
 """
 
 from __future__ import annotations
 
 from typing import Any
 
-import numpy as np
-
 from wsp_env.config import VehicleConfig
-from wsp_env.metrics import run_metrics
-from wsp_env.physics import layout as L
-from wsp_env.simulator import RunSetup, TrainSim, VehicleArrays
+from wsp_env.evaluation import CaseConfig, SuiteConfig, run_suite
+from wsp_env.simulator import VehicleArrays
 from wsp_env.trace_io import RunRecord
 
-PHYSICS_POLICIES = ("none",)
+# nothing drawn but the rail's adhesion level and pattern: nominal load, pads and level track
+NOMINAL_SCENARIO = {"load_factor": [1.0, 1.0], "pad_factor": [1.0, 1.0],
+                    "gradient_permille": [0.0, 0.0]}  # fmt: skip
 
 
-def run_stop(
-    vehicle: VehicleConfig,
-    setup: RunSetup,
-    policy: str = "none",
-    max_time_s: float = 600.0,
-    dt_s: float = 1e-3,
+def run_one(
+    vehicle: str | VehicleConfig,
+    rail_name: str,
+    speed_kmh: float,
+    policy: Any,
+    seed: int,
+    case: dict[str, Any] | None = None,
+    env_kwargs: dict[str, Any] | None = None,
 ) -> tuple[dict[str, Any], RunRecord]:
-    """Brake from ``setup.speed_kmh`` to standstill; return (metrics, record at 20 ms)."""
-    if policy not in PHYSICS_POLICIES:
-        raise ValueError(f"policy: {policy!r} is not a physics-level policy ({PHYSICS_POLICIES})")
-    sim = TrainSim(vehicle, n_envs=1, dt_s=dt_s)
-    sim.configure(0, setup)
-    sim.reset()
-    n_max = int(max_time_s / sim.control_period_s)
-    rows_t, rows_v, rows_w, rows_p, rows_d, rows_a = [], [], [], [], [], []
+    """One stop from ``speed_kmh`` on rail ``rail_name`` with ``policy`` (``policy.make_policy``).
 
-    def record() -> None:
-        rows_t.append(sim.time_s[0])
-        rows_v.append(sim.speed_mps[0])
-        rows_w.append(sim.wheel_speed_mps[0].copy())
-        rows_p.append(sim.pressure_bar[0].copy())
-        rows_d.append(sim.demand_bar()[0])
-        rows_a.append(sim.env_state[0, L.ES_DECEL])
-
-    record()
-    for _ in range(n_max):
-        sim.step()
-        record()
-        if sim.stopped[0]:
-            break
-    metrics = run_metrics(sim, 0)
-    t = np.asarray(rows_t)
-    keep = np.concatenate([[True], np.diff(t) > 1e-9])  # the stop step may be shorter
-    p = np.asarray(rows_p)[keep]
-    rec = RunRecord(
-        time_s=t[keep],
-        v_train_kmh=3.6 * np.asarray(rows_v)[keep],
-        v_axle_kmh=3.6 * np.asarray(rows_w)[keep],
-        p_cyl_bar=p,
-        p_demand_bar=np.asarray(rows_d)[keep],
-        a_train_mps2=np.asarray(rows_a)[keep],
-        v_ref_kmh=None,
-        wsp_active=p < np.asarray(rows_d)[keep][:, None] - 0.05,
+    ``seed`` draws what ``case`` (``evaluation.CaseConfig`` fields: ``mu_contaminated``,
+    ``pattern``, ``demand``, ...) leaves open; load, pads and gradient are nominal unless
+    ``env_kwargs["scenario"]`` says otherwise. Returns the evaluation's run result (metrics,
+    ``conditions``) and the record at the control period.
+    """
+    suite = SuiteConfig(
+        name="one",
+        description="",
+        seeds=(seed,),
+        cases=(
+            CaseConfig(name="run", rail=rail_name, speeds_kmh=(str(speed_kmh),), **(case or {})),
+        ),
     )
-    return metrics, rec
+    kwargs = dict(env_kwargs or {})
+    kwargs["scenario"] = {
+        "rails": {rail_name: 1.0},
+        **NOMINAL_SCENARIO,
+        **kwargs.get("scenario", {}),
+    }
+    results, records = run_suite(vehicle, suite, policy, record="all", env_kwargs=kwargs)
+    return results[0], next(iter(records.values()))
 
 
 def trace_metadata(
-    vehicle: VehicleConfig, setup: RunSetup, rail_name: str, sample_period_s: float, test_id: str
+    vehicle: VehicleConfig,
+    conditions: dict[str, Any],
+    rail_name: str,
+    sample_period_s: float,
+    test_id: str,
 ) -> dict[str, Any]:
-    """``*.meta.json`` of a simulated run: nominal vehicle data only (TRACE_FORMAT.md)."""
+    """``*.meta.json`` of a simulated run (``conditions``: a run result's, for the initial
+    speed and the demand): nominal vehicle data only (TRACE_FORMAT.md)."""
     sim_arrays = VehicleArrays.from_config(vehicle)
     gain, p_th = vehicle.brake.linear_torque()
     veh: dict[str, Any] = {
@@ -102,8 +93,8 @@ def trace_metadata(
         "format": "wsp-trace/1",
         "test_id": test_id,
         "sample_period_s": sample_period_s,
-        "initial_speed_kmh": setup.speed_kmh,
+        "initial_speed_kmh": conditions["speed_kmh"],
         "contaminant": contaminant,
-        "brake_type": "emergency" if setup.demand_fraction >= 1.0 else "service",
+        "brake_type": "emergency" if conditions["demand_fraction"] >= 1.0 else "service",
         "vehicle": veh,
     }

@@ -15,10 +15,8 @@ from typing import Any
 import numpy as np
 
 from wsp_env.config import RailConfig, load_vehicle
-from wsp_env.evaluation import CaseConfig, SuiteConfig, run_suite
 from wsp_env.policy import make_policy
-from wsp_env.runner import trace_metadata
-from wsp_env.simulator import RunSetup
+from wsp_env.runner import run_one, trace_metadata
 from wsp_env.trace_io import SensorModel, sample_run, write_trace
 
 
@@ -55,12 +53,6 @@ def simulate_trace(
     pressure. ``speed_scale_error`` / ``speed_lag_s``: the ground-speed sensor's scale error and
     lag.
     """
-    suite = SuiteConfig(
-        name="synthetic",
-        description="",
-        seeds=(seed,),
-        cases=(CaseConfig(name="trace", rail="_synthetic", speeds_kmh=(str(speed_kmh),), **case),),
-    )
     nominal = load_vehicle(vehicle)  # what the metadata declares
     veh = nominal
     # a coasting lead-in before the brake acts, as test logs have (coasting-creep channel)
@@ -86,14 +78,11 @@ def simulate_trace(
             for b in veh.bogies
         ),
     )
-    # nominal everything except what the caller injects: no random load, pad or gradient
-    scenario = {"load_factor": [1.0, 1.0], "pad_factor": [pad_factor, pad_factor],
-                "gradient_permille": [0.0, 0.0]}  # fmt: skip
-    env_kwargs = {"extra_rails": {"_synthetic": rail}, "scenario": scenario}
-    results, records = run_suite(
-        veh, suite, make_policy(policy, wsp_config), record="all", env_kwargs=env_kwargs
+    # nominal everything except what the caller injects
+    env_kwargs = {"extra_rails": {"_synthetic": rail}, "scenario": {"pad_factor": [pad_factor] * 2}}
+    result, record = run_one(
+        veh, "_synthetic", speed_kmh, make_policy(policy, wsp_config), seed, case, env_kwargs
     )
-    record = next(iter(records.values()))
     t = record.time_s
     if pressure_lag_s:  # the brake force follows the logged pressure pressure_lag_s later
         lead = np.stack([np.interp(t + pressure_lag_s, t, p) for p in record.p_cyl_bar.T], axis=1)
@@ -115,8 +104,8 @@ def simulate_trace(
         for i, err in enumerate(wheel_radius_error, start=1):
             columns[f"v_axle_{i}_kmh"] = columns[f"v_axle_{i}_kmh"] / (1.0 + err)
     meta = trace_metadata(
-        nominal, RunSetup(speed_kmh, rail), contaminant, (sensors or SensorModel()).sample_period_s,
+        nominal, result["conditions"], contaminant, (sensors or SensorModel()).sample_period_s,
         f"synthetic {vehicle} {speed_kmh:g} km/h seed {seed}",
     )  # fmt: skip
     csv_path, meta_path = write_trace(stem, columns, meta)
-    return csv_path, meta_path, results[0]
+    return csv_path, meta_path, result
