@@ -163,6 +163,7 @@ def test_simulate_runs_the_wsp_policies_on_the_evaluation_path(tmp_path):
         assert results[policy]["policy"] == policy
         assert results[policy]["max_lock_s"] < 1.0
         assert results[policy]["sliding_energy_kJ"] < 0.5 * results["none"]["sliding_energy_kJ"]
+        assert abs(results[policy]["energy_balance_rel_error"]) < 1e-9  # every run metric
     run, _ = run_one(
         "uic_z1", "soap", 100.0, make_policy("classical"), 2, {"mu_contaminated": 0.07}
     )

@@ -255,13 +255,7 @@ def _run_result(core: Any, e: int, run: Run, reference_m: float, policy: str) ->
         "reference_distance_m": float(reference_m),
         "extension_pct": 100.0 * (d / reference_m - 1.0) if reference_m > 0 else math.nan,
         "adhesion_utilisation": reference_m / d if d > 0 else math.nan,
-        "stopping_time_s": m["stopping_time_s"],
-        "stopped": m["stopped"],
-        "sliding_energy_kJ": m["sliding_energy_kJ"],
-        "air_litres": m["air_litres"],
-        "max_lock_s": m["max_lock_s"],
-        "longest_vent_s": m["longest_vent_s"],
-        "axles": m["axles"],
+        **m,  # every run metric (stopping time, sliding energy, air, locks, energy balance, axles)
         "conditions": core.describe(e),
     }
     out["checks"] = _judge(out, run.criteria)
