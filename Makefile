@@ -16,6 +16,10 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	mkdir -p runs/demo
 	$(BIN)/wsp-env simulate --json runs/demo/simulate.json --plot runs/demo/simulate.png --trace runs/demo/trace
+	$(BIN)/wsp-env simulate --policy classical --json runs/demo/simulate_classical.json \
+		--plot runs/demo/simulate_classical.png --trace runs/demo/trace_classical
+	$(BIN)/wsp-env calibrate runs/demo/trace_classical.csv --json runs/demo/calibrate.json \
+		--report runs/demo/calibration --export runs/demo/calibrated.yaml
 	$(BIN)/wsp-env evaluate --policy classical --policy none --policy oracle --suite quick \
 		--json runs/demo/evaluate.json --report runs/demo/report
 

@@ -10,7 +10,9 @@ the closing notes' numbers on the adhesion channel.
    adhesion candidate reaches there (the 1/3 bar of ``discovery.MIN_REDUCTION_ADHESION``).
 3. Injected effects (a gradient; adhesion effects on soap, where the floor is higher, and on
    oil): the effect named first, its parameters and the cut of its channel.
-4. Runtime of ``wsp-env calibrate --json --report --export`` on a ~60 s, 4-axle, 10 Hz trace
+4. Polach parameter recovery: seed 000 Table 4's law on the ETR 1000 (no recovery or
+   cleaning), pooled fit with the bogie-pitch term, and per axle, at several sensor settings.
+5. Runtime of ``wsp-env calibrate --json --report --export`` on a ~60 s, 4-axle, 10 Hz trace
    (median of 3, in-process: without the interpreter's start-up and imports).
 """
 
@@ -29,12 +31,12 @@ import numpy as np
 from scipy.signal import savgol_filter
 
 import wsp_env.env as env_module
-from wsp_env.calibration.adhesion_estimate import estimate_adhesion
-from wsp_env.calibration.discovery import discover
+from wsp_env.calibration.adhesion_estimate import estimate_adhesion, fit_polach
+from wsp_env.calibration.discovery import discover, fit_adhesion_model
 from wsp_env.calibration.synthetic import simulate_trace
 from wsp_env.calibration.traces import read_trace
 from wsp_env.cli import main as cli_main
-from wsp_env.config import load_rail
+from wsp_env.config import RecoveryConfig, load_rail
 from wsp_env.physics import layout as L
 from wsp_env.trace_io import SensorModel
 
@@ -170,6 +172,37 @@ def floors(directory: Path) -> None:
         )
 
 
+def parameter_recovery(directory: Path) -> None:
+    truth = np.array([0.1497, 30.0, 0.0291])  # mu0, K, K_rozv: seed 000 Table 4, axle 1
+    rail = dataclasses.replace(
+        load_rail("soap_etr1000"),
+        recovery=RecoveryConfig(w_lim=math.inf, w_max=math.inf),
+        clean_energy_J_per_m=math.inf,
+        pass_removal=0.0,
+    )
+    print("4. Polach parameters recovered (relative error of mu0, K, K_rozv; ETR 1000, 150 km/h)")
+    for period, noise in ((0.02, 0.0), (0.1, 0.0), (0.1, 0.03), (0.1, 0.1)):
+        sensors = SensorModel(
+            sample_period_s=period, speed_noise_kmh=noise, pressure_noise_bar=0.01 if noise else 0.0
+        )
+        csv_path, _, _ = simulate_trace(
+            directory / "polach", rail, 150.0, sensors=sensors, mu_contaminated=truth[0],
+            pattern="uniform",
+        )  # fmt: skip
+        trace = read_trace(csv_path)
+        fit = fit_adhesion_model(trace, per_axle=False, load_transfer=True)
+        pooled = fit.params[:3] / truth - 1 if fit is not None else np.full(3, np.nan)
+        axles = [fit_polach(p) for p in estimate_adhesion(trace)]
+        worst = np.nanmax(
+            [np.abs(np.array([f.mu0, f.K, f.K_rozv]) / truth - 1) for f in axles], axis=0
+        )
+        print(
+            f"   {1 / period:.0f} Hz, noise {noise} km/h: pooled with pitch "
+            f"{np.round(100 * pooled, 1)} %, pitch {fit.params[3]:.1f} kN per m/s^2; "
+            f"single axles at most {np.round(100 * worst, 1)} %"
+        )
+
+
 def runtime(directory: Path) -> None:
     csv_path, _, _ = simulate_trace(
         directory / "runtime", load_rail("soap"), 160.0, sensors=NOISY, mu_contaminated=0.08,
@@ -185,7 +218,7 @@ def runtime(directory: Path) -> None:
             cli_main(args)
         times.append(time.perf_counter() - t0)
     print(
-        f"4. calibrate with report and export, {trace.time_s[-1]:.0f} s / {trace.n_axles} axles / "
+        f"5. calibrate with report and export, {trace.time_s[-1]:.0f} s / {trace.n_axles} axles / "
         f"{len(trace.time_s)} samples: {statistics.median(times):.2f} s (median of 3)"
     )
 
@@ -195,6 +228,7 @@ def main() -> None:
         directory = Path(tmp)
         force_estimate(directory)
         floors(directory)
+        parameter_recovery(directory)
         runtime(directory)
 
 

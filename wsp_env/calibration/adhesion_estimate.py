@@ -51,6 +51,7 @@ from wsp_env.calibration.traces import Trace
 G = 9.80665
 LOW_SLIDING_KMH = 0.2  # seed 000 §3: low-sliding critical points, 0 < DV < 0.2 km/h
 VERTEX_MAX = 0.3  # samples: a turning point's parabola vertex must lie this close to t_k
+TURNING_SIGNIFICANCE = 3.0  # a turning point's curvature against the sensor noise's
 SPEED_RESOLUTION_KMH = 0.01  # floor of the speed-noise estimate (logger resolution)
 FORCE_REL_ERROR = 0.02  # relative force error beyond sensor noise (unknown load distribution)
 REWEIGHT = 2
@@ -177,6 +178,10 @@ def estimate_adhesion(trace: Trace, min_speed_kmh: float = 20.0) -> list[Critica
         turning = np.zeros(creep.size, dtype=bool)
         turning[1:-1] = np.sign(dcreep[:-1]) * np.sign(dcreep[1:]) < 0
         turning &= np.abs(d1) < VERTEX_MAX * np.abs(d2)
+        # and a real extremum, not sensor noise: the second difference of the creepage must
+        # stand out of the noise's (std sqrt(6) sigma_xi) by TURNING_SIGNIFICANCE
+        sigma_xi = np.sqrt(2.0) * sigma_v / np.maximum(v, 1.0)
+        turning &= np.abs(d2) > TURNING_SIGNIFICANCE * np.sqrt(6.0) * sigma_xi
         in_band = (slide * 3.6 > 0.0) & (slide * 3.6 < LOW_SLIDING_KMH)
         low = np.zeros(creep.size, dtype=bool)
         low[1:-1] = in_band[1:-1] & in_band[:-2] & in_band[2:]
@@ -201,7 +206,7 @@ def estimate_adhesion(trace: Trace, min_speed_kmh: float = 20.0) -> list[Critica
             normal_N=normal[k, i],
             decel_mps2=decel[k],
             sigma_force_N=np.hypot(sigma_f, FORCE_REL_ERROR * np.abs(fk)),
-            sigma_creepage=np.sqrt(2.0) * sigma_v / np.maximum(v[k], 1.0),
+            sigma_creepage=sigma_xi[k],
         )
         keep = (
             (torque[k] > 0.05 * gain)
@@ -225,16 +230,24 @@ def eq9(xi: np.ndarray, dv_kmh: np.ndarray, mu0: float, K: float, k_rozv: float)
 
 
 def eq9_slope(
-    xi: np.ndarray, dv_kmh: np.ndarray, mu0: float, K: float, k_rozv: float
+    xi: np.ndarray,
+    dv_kmh: np.ndarray,
+    mu0: float,
+    K: float,
+    k_rozv: float,
+    half_width: np.ndarray | float | None = None,
 ) -> np.ndarray:
-    """d eq9 / d xi at fixed train speed (``DV = xi V``, so DV moves with xi), by a central
-    difference."""
-    h = np.maximum(1e-6, 1e-3 * np.abs(xi))
+    """d eq9 / d xi at fixed train speed (``DV = xi V``, so DV moves with xi): the derivative,
+    or with ``half_width`` the secant over ``[xi - w, xi + w]`` (clipped at zero creepage) —
+    the slope a creepage known to ``+- w`` sees on a curved law."""
+    w = np.maximum(1e-6, 1e-3 * np.abs(xi)) if half_width is None else half_width
     nonzero = np.abs(xi) > 1e-9
     speed_kmh = np.where(nonzero, dv_kmh / np.where(nonzero, xi, 1.0), 0.0)
-    up = eq9(xi + h, (xi + h) * speed_kmh, mu0, K, k_rozv)
-    down = eq9(xi - h, (xi - h) * speed_kmh, mu0, K, k_rozv)
-    return (up - down) / (2.0 * h)
+    hi = xi + w
+    lo = np.maximum(xi - w, 0.0) if half_width is not None else xi - w
+    up = eq9(hi, hi * speed_kmh, mu0, K, k_rozv)
+    down = eq9(lo, lo * speed_kmh, mu0, K, k_rozv)
+    return (up - down) / (hi - lo)
 
 
 @dataclass
@@ -293,7 +306,10 @@ def fit_law(
         )
         p0 = sol.x
         mult = factor_of(p0[3:]) if factor_of is not None else 1.0
-        slope = eq9_slope(pts.creepage, pts.sliding_kmh, *p0[:3]) * normal * mult
+        # secant over the creepage's +-2 sigma: a point whose creepage is lost in the sensor
+        # noise may sit anywhere on the steep initial slope
+        slope = eq9_slope(pts.creepage, pts.sliding_kmh, *p0[:3], 2.0 * pts.sigma_creepage)
+        slope = slope * normal * mult
         sigma = np.hypot(pts.sigma_force_N / 1e3, slope * pts.sigma_creepage)
     span = hi - lo
     hit = (np.abs(p0 - lo) < 1e-4 * span) | (np.abs(p0 - hi) < 1e-4 * span)

@@ -510,10 +510,11 @@ def discover(trace: Trace) -> Result:
             break
         # the channel with the largest relative cut goes first; on it, candidates whose remaining
         # error is within half a noise floor of the best are a tie, broken by fewer parameters
+        # (the adhesion channel has no floor: within a tenth of its error before)
         lead = max(qualified, key=lambda q: q[0])
         channel = _channel_of(lead[1])
         same = [q for q in qualified if _channel_of(q[1]) == channel]
-        margin = 0.5 * floors.get(channel, 0.05 * lead[4])
+        margin = 0.5 * floors.get(channel, 0.2 * lead[4])
         best_after = min(q[5] for q in same)
         best = min((q for q in same if q[5] <= best_after + margin), key=lambda q: (q[7], q[5]))
         gain, cand, params, new, rmse0, rmse1, dbic, _ = best
