@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+from pathlib import Path
 
 import pytest
 
@@ -270,3 +271,22 @@ def test_export_orders_axle_factors_numerically():
     step = Step("adhesion_per_axle", "adhesion_per_axle", "adhesion_fit_kN", params, 1, 0.4, -50)
     factors = scenario_options(Result({}, {}, added=[step]))["axle_mu_factor"]
     assert factors == pytest.approx([i / 11.0 for i in [1, *range(2, 12)]])
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_no_wsp_trace_with_locked_wheels_adds_nothing(tmp_path, seed):
+    """Full demand, no WSP: the wheels lock within seconds, so the balance sees only the first
+    few seconds; its starting speed must not be one noisy sample (that fitted a gradient)."""
+    path, _, _ = simulate_trace(
+        tmp_path / "locked", load_rail("soap"), 120.0, policy="none", sensors=SENSORS,
+        seed=seed, coast_s=0.0,
+    )  # fmt: skip
+    assert [s for s in discover(read_trace(path)).added if s.channel != "adhesion_fit_kN"] == []
+
+
+def test_the_no_wsp_trace_that_showed_a_false_gradient():
+    """A stored `wsp-env simulate` trace (no WSP, seed 0, before simulate ran on the evaluation
+    path) on which one noisy starting sample fitted a gradient of 1.7 permille (7.4 before the
+    critical-point estimator)."""
+    trace = read_trace(Path(__file__).parent / "data" / "no_wsp_locked.csv")
+    assert [s for s in discover(trace).added if s.channel != "adhesion_fit_kN"] == []

@@ -56,7 +56,9 @@ from wsp_env.calibration.adhesion_estimate import (
 )
 from wsp_env.calibration.residuals import (
     MIN_SPEED_KMH,
+    anchored,
     balance_intervals,
+    balance_mask,
     brake_force_N,
     channels,
     coasting_creep,
@@ -124,36 +126,38 @@ class Result:
 
 
 def _linear(
-    residual: np.ndarray, mask: np.ndarray, regressors: list[np.ndarray]
+    trace: Trace, residual: np.ndarray, mask: np.ndarray, regressors: list[np.ndarray]
 ) -> tuple[np.ndarray, np.ndarray]:
-    X = np.stack([r[mask] for r in regressors], axis=1)
-    coef, *_ = np.linalg.lstsq(X, residual[mask], rcond=None)
-    return coef, residual - np.stack(regressors, axis=1) @ coef
+    """Least squares of the balance residual on ``regressors``, anchored as the residual is."""
+    X = np.stack([anchored(r, trace.time_s, mask) for r in regressors], axis=1)
+    coef, *_ = np.linalg.lstsq(X[mask], residual[mask], rcond=None)
+    return coef, residual - X @ coef
 
 
 def _balance_regressor(trace: Trace, force: np.ndarray) -> np.ndarray:
     """Change of the predicted speed (km/h) for an extra retarding force ``force`` (N)."""
     valid = balance_intervals(trace)
-    return 3.6 * masked_cumtrapz(trace.time_s, force, valid) / float(trace.vehicle["mass_kg"])
+    change = 3.6 * masked_cumtrapz(trace.time_s, force, valid) / float(trace.vehicle["mass_kg"])
+    return anchored(change, trace.time_s, balance_mask(trace))
 
 
 def _fit_gradient(trace, residual, mask):
     mass = float(trace.vehicle["mass_kg"])
     reg = _balance_regressor(trace, np.full(len(trace.time_s), mass * G))
-    coef, res = _linear(residual, mask, [reg])
+    coef, res = _linear(trace, residual, mask, [reg])
     return {"gradient_permille": -1000.0 * coef[0]}, res
 
 
 def _fit_resistance(trace, residual, mask):
     v = trace.v_train_kmh / 3.6
     regs = [_balance_regressor(trace, np.ones_like(v)), _balance_regressor(trace, v * v)]
-    coef, res = _linear(residual, mask, regs)
+    coef, res = _linear(trace, residual, mask, regs)
     return {"delta_a_N": -coef[0], "delta_c_N_per_mps2": -coef[1]}, res
 
 
 def _fit_pad_scale(trace, residual, mask):
     brake = brake_force_N(trace).sum(axis=1)
-    coef, res = _linear(residual, mask, [_balance_regressor(trace, brake)])
+    coef, res = _linear(trace, residual, mask, [_balance_regressor(trace, brake)])
     return {"scale": 1.0 - coef[0]}, res
 
 
@@ -161,7 +165,7 @@ def _fit_pad(trace, residual, mask):
     brake = brake_force_N(trace).sum(axis=1)
     dv = trace.v_train_kmh / 3.6 - 100.0 / 3.6
     regs = [_balance_regressor(trace, brake), _balance_regressor(trace, brake * dv)]
-    coef, res = _linear(residual, mask, regs)
+    coef, res = _linear(trace, residual, mask, regs)
     return {"scale": 1.0 - coef[0], "slope_per_mps": -coef[1]}, res
 
 
@@ -175,7 +179,7 @@ def _demand_fraction(trace: Trace) -> np.ndarray:
 
 
 def _fit_unmeasured(trace, residual, mask):
-    coef, res = _linear(residual, mask, [_balance_regressor(trace, _demand_fraction(trace))])
+    coef, res = _linear(trace, residual, mask, [_balance_regressor(trace, _demand_fraction(trace))])
     return {"force_at_full_demand_N": -coef[0]}, res
 
 
@@ -205,7 +209,7 @@ def _fit_sensor_balance(trace, residual, mask):
     """
     # residual = predicted - measured drop = drop - (1 + s) drop = -s x (true speed drop)
     drop = -masked_cumdiff(trace.v_train_kmh, balance_intervals(trace))
-    coef, res = _linear(residual, mask, [drop])
+    coef, res = _linear(trace, residual, mask, [drop])
     s = -coef[0]
     coasting = coasting_creep(trace)
     if coasting.mask.any():
@@ -222,7 +226,7 @@ def _fit_sensor_lag(trace, residual, mask):
     predicted_drop = residual + measured_drop  # km/h (residual = predicted - measured drop)
     decel_kmh_s = np.gradient(predicted_drop, trace.time_s)
     # measured drop(t) = true drop(t - tau) ~ true drop(t) - tau a(t): residual ~ tau a(t)
-    coef, res = _linear(residual, mask, [decel_kmh_s])
+    coef, res = _linear(trace, residual, mask, [decel_kmh_s])
     if coef[0] <= 0.0:  # a lag cannot lead
         return None
     return {"speed_lag_s": float(coef[0])}, res
@@ -448,11 +452,11 @@ def discover(trace: Trace) -> Result:
                 names = list(terms)
                 single = {}
                 for a in names:
-                    _, r1 = _linear(res, mask, [terms[a][0]])
+                    _, r1 = _linear(trace, res, mask, [terms[a][0]])
                     single[a] = math.sqrt(float(np.sum(r1[mask] ** 2)) / n)
                 for i, a in enumerate(names):
                     for b in names[i + 1 :]:
-                        coef, new = _linear(res, mask, [terms[a][0], terms[b][0]])
+                        coef, new = _linear(trace, res, mask, [terms[a][0], terms[b][0]])
                         rmse1 = math.sqrt(float(np.sum(new[mask] ** 2)) / n)
                         dbic = _bic(rmse1**2 * n, n, 2) - _bic(rss0, n, 0)
                         gain = 1 - rmse1 / rmse0
@@ -547,7 +551,7 @@ def discover(trace: Trace) -> Result:
                 ch = "train_speed_balance_kmh"
                 s = params["speed_scale_error"]
                 drop = -masked_cumdiff(trace.v_train_kmh, balance_intervals(trace))
-                residual[ch] = residual[ch] + s * drop
+                residual[ch] = residual[ch] + s * anchored(drop, trace.time_s, masks[ch])
                 used.add("sensor" + ch)
                 m = masks[ch]
                 result.errors_after[ch] = float(np.sqrt(np.mean(residual[ch][m] ** 2)))

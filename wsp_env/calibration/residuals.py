@@ -9,7 +9,8 @@ model on measured quantities and tests one equation:
   ``V(t) = V(0) - 1/M [ int (sum_i T_i / r + R(V)) dt + sum_i J (v_i(t) - v_i(0)) / r^2 ]`` with
   ``T_i = gain (p_i - p_th)^+`` and ``R`` the nominal resistance (metadata ``resistance``, else
   none) — against the measured train speed, over the intervals where every wheel turns (a
-  locked wheel's brake force is not known from its pressure). Sees gradient, resistance, pad
+  locked wheel's brake force is not known from its pressure); the starting speed ``V(0)`` is
+  the mean over the first ``ANCHOR_S`` rather than one noisy sample. Sees gradient, resistance, pad
   friction, unmeasured brake forces, pressure lag, ground-speed sensor errors. Its floor is
   about the sensor noise.
 * **adhesion fit** (kN): the adhesion force at each critical point (``adhesion_estimate``)
@@ -31,6 +32,7 @@ from wsp_env.calibration.traces import Trace
 MIN_SPEED_KMH = 10.0
 LOCK_KMH = 1.0  # a wheel slower than this is locked
 COAST_MIN_S = 2.0
+ANCHOR_S = 1.0  # the balance's starting speed: the mean over this first stretch of the record
 
 
 @dataclass
@@ -82,6 +84,25 @@ def masked_cumdiff(y: np.ndarray, valid: np.ndarray) -> np.ndarray:
     return np.concatenate([[0.0], np.cumsum(np.diff(y) * valid)])
 
 
+def balance_mask(trace: Trace) -> np.ndarray:
+    """Samples the balance channel is scored on: above ``MIN_SPEED_KMH``, every wheel turning."""
+    valid = balance_intervals(trace)
+    return (trace.v_train_kmh > MIN_SPEED_KMH) & np.concatenate([[True], valid])
+
+
+def anchored(y: np.ndarray, t: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """``y`` less its mean over the first ``ANCHOR_S`` of ``mask``.
+
+    The balance starts from one logged speed sample, noise and all; anchoring on a short mean
+    instead takes that noise out. Every effect's signature in the balance goes through the
+    same operation (it is linear and idempotent), so fits stay unbiased.
+    """
+    if not mask.any():
+        return y
+    first = mask & (t <= t[mask][0] + ANCHOR_S)
+    return y - float(y[first].mean())
+
+
 def train_speed_balance(trace: Trace) -> Channel:
     veh = trace.vehicle
     mass = float(veh["mass_kg"])
@@ -96,7 +117,8 @@ def train_speed_balance(trace: Trace) -> Channel:
     predicted_drop = (masked_cumtrapz(t, force, valid) + spin) / mass
     measured_drop = -masked_cumdiff(v, valid)
     residual = 3.6 * (predicted_drop - measured_drop)
-    mask = (trace.v_train_kmh > MIN_SPEED_KMH) & np.concatenate([[True], valid])
+    mask = balance_mask(trace)
+    residual = anchored(residual, t, mask)
     rmse = float(np.sqrt(np.mean(residual[mask] ** 2))) if mask.any() else float("nan")
     # sampling uncertainty of the force integral: per interval, half the gap between the left
     # and right Riemann sums (a 10 Hz log of a valve venting at 10 bar/s is far from smooth),
