@@ -121,6 +121,11 @@ def _mutations():
     def axle_count(h, rows, m):
         m["vehicle"]["n_axles"] = 2
         m["vehicle"].pop("axle_static_load_kN")
+        m["vehicle"].pop("axle_load_transfer_kN_per_mps2")
+        return h, rows, m
+
+    def short_transfer(h, rows, m):
+        m["vehicle"]["axle_load_transfer_kN_per_mps2"] = [1.0, -1.0]
         return h, rows, m
 
     def text_cell(h, rows, m):
@@ -153,6 +158,7 @@ def _mutations():
         (kpa, "'p_cyl_1_bar'"),
         (mps, "looks like m/s"),
         (axle_count, "vehicle.n_axles: 2"),
+        (short_transfer, "vehicle.axle_load_transfer_kN_per_mps2: must list one number per axle"),
         (text_cell, "non-numeric value 'n/a'"),
         (bad_format, "format: expected"),
         (duplicate, "appears twice"),

@@ -298,6 +298,7 @@ def cmd_calibrate(args: argparse.Namespace) -> dict[str, Any]:
         "errors_after": result.errors_after,
         "added_effects": [s.as_dict() for s in result.added],
         "unexplained": result.unexplained,
+        "adhesion_law": result.adhesion_law,
         "candidates": result.considered,
         "notes": trace.notes,
         "outputs": [],

@@ -71,6 +71,12 @@ def trace_metadata(
         "wheel_radius_m": vehicle.wheel_radius_m,
         "wheelset_inertia_kgm2": vehicle.wheelset_inertia_kgm2,
         "axle_static_load_kN": [round(x / 1e3, 3) for x in sim_arrays.load_ref_N],
+        # optional, beyond TRACE_FORMAT.md's list: the quasi-static load transfer per axle that
+        # the vehicle's documents (its config: pivot and frame heights) give, body and bogie
+        # pitch together; calibration reads it when present
+        "axle_load_transfer_kN_per_mps2": [
+            round(x / 1e3, 4) for x in sim_arrays.transfer_body + sim_arrays.transfer_rest
+        ],
         "brake": {
             "p_threshold_bar": p_th,
             "torque_gain_Nm_per_bar": gain,

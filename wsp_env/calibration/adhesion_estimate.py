@@ -4,9 +4,9 @@ creepage from ground and axle speeds, critical points, and a Polach (Eq. 9) fit.
 Per axle ``i`` the seed's wheelset equation ``J domega/dt = F r - T`` is solved for the
 adhesion force ``F``, with the brake torque from the nominal linear law
 ``T = gain (p - p_th)^+`` (seed 000 Eqs. 3–6, ``TRACE_FORMAT.md``), the normal load from the
-metadata (static, plus the body's load transfer ``+- m a h / L`` on the leading / trailing
-bogie when CoG height and bogie spacing are given), ``mu = F / N`` (Eq. 7), creepage
-``xi = (V - v_i) / V`` (Eq. 8) and sliding speed ``DV = V - v_i``.
+metadata (static, plus the load transfer: per axle if the metadata gives it, else the body's
+``+- m a h / L`` on the leading / trailing bogie; ``normal_loads``), ``mu = F / N`` (Eq. 7),
+creepage ``xi = (V - v_i) / V`` (Eq. 8) and sliding speed ``DV = V - v_i``.
 
 **Critical points** (seed 000 §3, Fig. 4) are the samples where the creepage derivative changes
 sign — the used adhesion equals the available one there — plus the low-sliding points
@@ -33,6 +33,12 @@ term's sensor noise, the pressure noise and ``FORCE_REL_ERROR`` of the force (no
 metadata cannot describe: bogie pitch). The weights follow the fitted curve's slope
 (re-weighted ``REWEIGHT`` times). RMSEs are weighted the same way, in kN of a well-resolved
 point.
+
+**Recovery** (``fit_base_law``): on a contaminant that sliding removes (soap), the used adhesion
+at a slide's turning point depends on the sliding power that came before it, as in the
+simulator (seed 002 Eqs. 9–14). The base law can therefore blend Eq. 9 toward a recovered
+curve with the filtered removed fraction, when the data call for it (BIC); W_lim and W_max come
+from a grid, the recovered level is fitted.
 """
 
 from __future__ import annotations
@@ -44,7 +50,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.integrate import cumulative_trapezoid
 from scipy.optimize import least_squares
-from scipy.signal import savgol_filter
+from scipy.signal import bilinear, lfilter, savgol_filter
 
 from wsp_env.calibration.traces import Trace
 
@@ -132,15 +138,24 @@ def train_deceleration(trace: Trace, smooth_s: float = 1.0) -> np.ndarray:
 
 
 def normal_loads(trace: Trace, decel: np.ndarray) -> np.ndarray:
-    """(T, n_axles) normal loads in N: static (metadata) plus body load transfer if known."""
+    """(T, n_axles) normal loads in N: static (metadata) plus the quasi-static load transfer.
+
+    The transfer is the metadata's ``axle_load_transfer_kN_per_mps2`` (body and bogie pitch per
+    axle, N = N_static + k a) when given; else the body's ``+- m a h / L`` on the leading /
+    trailing bogie from ``cog_height_m`` and ``bogie_centre_distance_m`` (bogie pitch, which
+    needs pivot heights, is then left to the calibration loop's ``load_transfer`` effect).
+    """
     veh = trace.vehicle
     n = trace.n_axles
     mass = float(veh["mass_kg"])
     loads = veh.get("axle_static_load_kN")
     static = np.asarray(loads, dtype=float) * 1e3 if loads else np.full(n, mass * G / n)
     out = np.tile(static, (len(decel), 1))
+    transfer = veh.get("axle_load_transfer_kN_per_mps2")
     h, L = veh.get("cog_height_m"), veh.get("bogie_centre_distance_m")
-    if h and L and n % 2 == 0:
+    if transfer is not None and len(transfer) == n:
+        out += decel[:, None] * np.asarray(transfer, dtype=float)[None, :] * 1e3
+    elif h and L and n % 2 == 0:
         dn = mass * decel * h / L  # front bogie gains, rear loses; shared by its axles
         half = n // 2
         out[:, :half] += dn[:, None] / half
@@ -254,10 +269,11 @@ def eq9_slope(
 class LawFit:
     """A pooled Eq. 9 law (plus extensions) fitted to critical points."""
 
-    params: np.ndarray  # mu0, K, K_rozv, then the extensions' parameters in order
+    params: np.ndarray  # mu0, K, K_rozv, [mu_rec / mu0 with recovery], then the extensions'
     residual_kN: np.ndarray  # measured - model force per point
     sigma_kN: np.ndarray  # effective standard error per point
     at_bound: bool  # an extension parameter ran to its bound (not identified)
+    n_law: int = 3  # parameters of the law itself (4 with recovery)
 
     @property
     def rmse(self) -> float:
@@ -271,6 +287,8 @@ class LawFit:
 
 
 BASE_START, BASE_LOW, BASE_HIGH = [0.1, 30.0, 0.02], [0.005, 0.5, 0.0], [1.0, 1e4, 1.0]
+# recovery: mu_rec / mu0 from 1 (no gain, only the falling friction removed) to 5
+GAIN_STARTS, GAIN_LOW, GAIN_HIGH = (1.25, 2.0), 1.0, 5.0
 
 
 def fit_law(
@@ -280,40 +298,128 @@ def fit_law(
     start: list[float] | None = None,
     low: list[float] | None = None,
     high: list[float] | None = None,
+    removed: np.ndarray | None = None,
+    law_start: np.ndarray | None = None,
 ) -> LawFit | None:
     """Eq. 9 for every point, times ``factor_of(extra_params)`` (a per-point multiplier on
     the force, ``None``: 1), by effective-variance weighted least squares (module docstring).
-    Returns ``None`` with fewer than 5 points."""
+
+    ``removed``: per point, the filtered fraction of contaminant removed (``removed_fraction``);
+    the law then blends toward the recovered curve, seed 002 Eq. 12 as the simulator reads it
+    (``physics.adhesion``): ``mu = (1 - K_W) eq9 + K_W mu_rec (1 - exp(-K xi / mu_rec))`` with
+    ``mu_rec = g mu0`` and ``g`` a fourth law parameter (fitted from two starts: the blend makes
+    the problem multimodal). ``law_start``: the law's parameters to start from (one start; an
+    extension starts from the fitted base law). Returns ``None`` with fewer than 5 points."""
     if len(pts) < 5:
         return None
     force = pts.force_N / 1e3
     normal = pts.normal_N / 1e3
-    p0 = np.array(BASE_START + list(start or []), dtype=float)
-    p0[0] = max(float(np.quantile(pts.mu, 0.9)), 0.02)
-    lo = np.array(BASE_LOW + list(low or []), dtype=float)
-    hi = np.array(BASE_HIGH + list(high or []), dtype=float)
-    scale = np.concatenate([[0.05, 30.0, 0.02], np.ones(n_extra)])
+    n_law = 3 if removed is None else 4
+    rec_low, rec_high = ([], []) if removed is None else ([GAIN_LOW], [GAIN_HIGH])
+    lo = np.array(BASE_LOW + rec_low + list(low or []), dtype=float)
+    hi = np.array(BASE_HIGH + rec_high + list(high or []), dtype=float)
+    scale = np.concatenate([[0.05, 30.0, 0.02], [0.25] * (n_law - 3), np.ones(n_extra)])
 
     def model(p: np.ndarray) -> np.ndarray:
-        f = eq9(pts.creepage, pts.sliding_kmh, *p[:3]) * normal
-        return f * factor_of(p[3:]) if factor_of is not None else f
+        mu = eq9(pts.creepage, pts.sliding_kmh, *p[:3])
+        if removed is not None:
+            mu_rec = p[3] * p[0]
+            recovered = mu_rec * (1.0 - np.exp(-p[1] * pts.creepage / mu_rec))
+            mu = (1.0 - removed) * mu + removed * recovered
+        f = mu * normal
+        return f * factor_of(p[n_law:]) if factor_of is not None else f
 
-    sigma = pts.sigma_force_N / 1e3
-    for _ in range(REWEIGHT + 1):
-        s = sigma
-        sol = least_squares(
-            lambda p, s=s: (model(p) - force) / s, p0, bounds=(lo, hi), x_scale=scale
-        )
-        p0 = sol.x
-        mult = factor_of(p0[3:]) if factor_of is not None else 1.0
-        # secant over the creepage's +-2 sigma: a point whose creepage is lost in the sensor
-        # noise may sit anywhere on the steep initial slope
-        slope = eq9_slope(pts.creepage, pts.sliding_kmh, *p0[:3], 2.0 * pts.sigma_creepage)
-        slope = slope * normal * mult
-        sigma = np.hypot(pts.sigma_force_N / 1e3, slope * pts.sigma_creepage)
-    span = hi - lo
-    hit = (np.abs(p0 - lo) < 1e-4 * span) | (np.abs(p0 - hi) < 1e-4 * span)
-    return LawFit(p0, force - model(p0), s, bool(hit[3:].any()))
+    if law_start is not None:
+        starts = [list(np.clip(law_start[:n_law], lo[:n_law], hi[:n_law]))]
+    else:
+        mu0 = max(float(np.quantile(pts.mu, 0.9)), 0.02)
+        gains = GAIN_STARTS if removed is not None else (None,)
+        starts = [[mu0, *BASE_START[1:]] + ([] if g is None else [g]) for g in gains]
+    best: LawFit | None = None
+    for law0 in starts:
+        p0 = np.array(law0 + list(start or []), dtype=float)
+        sigma = pts.sigma_force_N / 1e3
+        for _ in range(REWEIGHT + 1):
+            s = sigma
+            sol = least_squares(
+                lambda p, s=s: (model(p) - force) / s, p0, bounds=(lo, hi), x_scale=scale
+            )
+            p0 = sol.x
+            mult = factor_of(p0[n_law:]) if factor_of is not None else 1.0
+            # secant over the creepage's +-2 sigma: a point whose creepage is lost in the sensor
+            # noise may sit anywhere on the steep initial slope (the degraded law's slope, also
+            # with recovery: the recovered curve rises as steeply)
+            slope = eq9_slope(pts.creepage, pts.sliding_kmh, *p0[:3], 2.0 * pts.sigma_creepage)
+            slope = slope * normal * mult
+            sigma = np.hypot(pts.sigma_force_N / 1e3, slope * pts.sigma_creepage)
+        span = hi - lo
+        hit = (np.abs(p0 - lo) < 1e-4 * span) | (np.abs(p0 - hi) < 1e-4 * span)
+        fit = LawFit(p0, force - model(p0), s, bool(hit[n_law:].any()), n_law)
+        if best is None or fit.chi2 < best.chi2:
+            best = fit
+    return best
+
+
+# seed 002 Table 5: the removal fraction's second-order lag (Eq. 11)
+RECOVERY_TAU_S, RECOVERY_ZETA = 0.1, 1.0
+# W_lim and W_max - W_lim (kW of sliding power) tried for the recovery; none = no recovery
+RECOVERY_GRID_KW = tuple(
+    (w, span) for w in (0.5, 1.0, 2.0, 4.0, 8.0) for span in (2.0, 5.0, 10.0, 20.0)
+)
+RECOVERY_MIN_DELTA_BIC = 10.0
+
+
+def removed_fraction(trace: Trace, w_lim_kW: float, w_span_kW: float) -> np.ndarray:
+    """(T, n_axles) filtered fraction of contaminant removed, seed 002 Eqs. 10–11 and 13.
+
+    The specific sliding power is read as watts (``physics.adhesion``, basis ``sliding_power``):
+    ``W = F DV`` with the brake force ``gain (p - p_th)^+ / r`` standing for the adhesion force
+    of a sliding wheel; ``K_W = clip((W - W_lim) / (W_max - W_lim), 0, 1)`` goes through the
+    second-order lag of Eq. 11 (Table 5: tau 0.1 s, zeta 1), discretised by Tustin (Eq. 13) at
+    the trace's median sample period.
+    """
+    veh = trace.vehicle
+    brake = veh.get("brake", {})
+    gain = float(brake.get("torque_gain_Nm_per_bar", 0.0))
+    p_th = float(brake.get("p_threshold_bar", 0.0))
+    force = gain * np.maximum(0.0, trace.p_cyl_bar - p_th) / float(veh["wheel_radius_m"])
+    sliding = np.maximum(trace.v_train_kmh[:, None] - trace.v_axle_kmh, 0.0) / 3.6
+    k_w = np.clip((force * sliding / 1e3 - w_lim_kW) / w_span_kW, 0.0, 1.0)
+    dt = float(np.median(np.diff(trace.time_s)))
+    wn = 1.0 / RECOVERY_TAU_S
+    b, a = bilinear([wn * wn], [1.0, 2.0 * RECOVERY_ZETA * wn, wn * wn], fs=1.0 / dt)
+    return lfilter(b, a, k_w, axis=0)
+
+
+@dataclass
+class BaseLaw:
+    """The adhesion channel's nominal law: Eq. 9, with recovery where the data call for it."""
+
+    fit: LawFit
+    recovery_kW: tuple[float, float] | None  # (W_lim, W_max - W_lim), or None
+    removed: np.ndarray | None  # per point, the filtered removed fraction
+
+
+def fit_base_law(trace: Trace, pts: CriticalPoints) -> BaseLaw | None:
+    """Eq. 9 alone, or with recovery (``RECOVERY_GRID_KW``; the best by chi-square) if that
+    lowers the BIC by ``RECOVERY_MIN_DELTA_BIC`` (three more parameters: W_lim, W_max,
+    mu_rec / mu0). No bar on the RMSE cut: a strong effect elsewhere in the data (per-axle
+    adhesion, say) dilutes the cut that recovery alone brings, not its evidence."""
+    plain = fit_law(pts)
+    if plain is None:
+        return None
+    best: BaseLaw | None = None
+    for w_lim, w_span in RECOVERY_GRID_KW:
+        removed = removed_fraction(trace, w_lim, w_span)[pts.sample, pts.axle]
+        fit = fit_law(pts, removed=removed)
+        if fit is not None and (best is None or fit.chi2 < best.fit.chi2):
+            best = BaseLaw(fit, (w_lim, w_span), removed)
+    n = len(pts)
+    if best is not None:
+        dbic = n * np.log(best.fit.chi2 / plain.chi2) + 3 * np.log(n)
+        if dbic < -RECOVERY_MIN_DELTA_BIC:
+            return best
+    return BaseLaw(plain, None, None)
 
 
 def fit_polach(points: CriticalPoints) -> PolachFit:

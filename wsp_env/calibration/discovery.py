@@ -53,6 +53,7 @@ from wsp_env.calibration.adhesion_estimate import (
     fit_law,
     noise_std,
     pooled_points,
+    removed_fraction,
 )
 from wsp_env.calibration.residuals import (
     MIN_SPEED_KMH,
@@ -120,6 +121,8 @@ class Result:
     # channels still well above their noise floor once nothing more qualifies: an effect the
     # library does not hold ("other"), reported rather than forced onto a wrong category
     unexplained: list[dict[str, float | str]] = field(default_factory=list)
+    # the adhesion law in the end: mu0, K, K_rozv, recovery (W_lim / W_max in kW, gain) if any
+    adhesion_law: dict[str, float] = field(default_factory=dict)
 
 
 # ---- linear fits on the balance channel ------------------------------------------------------
@@ -300,8 +303,11 @@ def fit_adhesion_model(
     load_transfer: bool,
     step_m: float | None = None,
     pts: CriticalPoints | None = None,
+    removed: np.ndarray | None = None,
+    law_start: np.ndarray | None = None,
 ) -> LawFit | None:
-    """One Eq. 9 law for all axles' critical points (``pts``, default: the trace's), times the
+    """One Eq. 9 law for all axles' critical points (``pts``, default: the trace's; with the
+    base law's recovery when ``removed`` is given, see ``adhesion_estimate.fit_law``), times the
     chosen extensions' factors: a friction factor per axle (axle 1 = 1), a bogie-pitch load
     transfer ``+- k a`` on the leading / trailing axle of each bogie (consecutive pairs), a
     friction factor on the rail beyond ``step_m`` (position of the rail under the axle)."""
@@ -337,11 +343,17 @@ def fit_adhesion_model(
         return out
 
     extended = per_axle or load_transfer or step_m is not None
-    return fit_law(pts, factor_of if extended else None, len(start), start, low, high)
+    factors = factor_of if extended else None
+    return fit_law(pts, factors, len(start), start, low, high, removed, law_start)
 
 
 def fit_adhesion_step(
-    trace: Trace, per_axle: bool, load_transfer: bool, pts: CriticalPoints
+    trace: Trace,
+    per_axle: bool,
+    load_transfer: bool,
+    pts: CriticalPoints,
+    removed: np.ndarray | None = None,
+    law_start: np.ndarray | None = None,
 ) -> tuple[LawFit | None, float]:
     """The adhesion model with a friction step on the rail, the step's position chosen on a
     grid of the critical points' positions (best weighted fit)."""
@@ -350,7 +362,9 @@ def fit_adhesion_step(
         return None, float("nan")
     best: tuple[LawFit | None, float] = (None, float("nan"))
     for step_m in x.min() + STEP_FRACTIONS * (x.max() - x.min()):
-        fit = fit_adhesion_model(trace, per_axle, load_transfer, float(step_m), pts)
+        fit = fit_adhesion_model(
+            trace, per_axle, load_transfer, float(step_m), pts, removed, law_start
+        )
         if fit is not None and (best[0] is None or fit.chi2 < best[0].chi2):
             best = (fit, float(step_m))
     return best
@@ -410,7 +424,16 @@ def discover(trace: Trace) -> Result:
     adhesion = {"per_axle": False, "load_transfer": False, "position": False}
     points = pooled_points(trace, MIN_SPEED_KMH)  # shared by every adhesion candidate
     adh_rmse = chans["adhesion_fit_kN"].rmse
-    adh_chi2 = chans["adhesion_fit_kN"].detail.get("chi2", float("nan"))
+    adh_detail = chans["adhesion_fit_kN"].detail
+    result.adhesion_law = {k: v for k, v in adh_detail.items() if k != "chi2"}
+    adh_chi2 = adh_detail.get("chi2", float("nan"))
+    removed = None  # the base law's recovery, kept under every extension
+    law_start = np.array([adh_detail.get(k, np.nan) for k in ("mu0", "K", "K_rozv")])
+    if "recovery_w_lim_kW" in adh_detail:
+        law_start = np.append(law_start, adh_detail["recovery_gain"])
+        w_lim = adh_detail["recovery_w_lim_kW"]
+        w_span = adh_detail["recovery_w_max_kW"] - w_lim
+        removed = removed_fraction(trace, w_lim, w_span)[points.sample, points.axle]
     used: set[str] = set()
     for _ in range(MAX_EFFECTS):
         qualified: list[tuple] = []
@@ -481,11 +504,17 @@ def discover(trace: Trace) -> Result:
             step_m = float("nan")
             if trial["position"]:
                 fit, step_m = fit_adhesion_step(
-                    trace, trial["per_axle"], trial["load_transfer"], points
+                    trace, trial["per_axle"], trial["load_transfer"], points, removed, law_start
                 )
             else:
                 fit = fit_adhesion_model(
-                    trace, trial["per_axle"], trial["load_transfer"], None, points
+                    trace,
+                    trial["per_axle"],
+                    trial["load_transfer"],
+                    None,
+                    points,
+                    removed,
+                    law_start,
                 )
             if fit is None or fit.at_bound:  # not identified (a parameter ran to its bound)
                 continue
@@ -498,7 +527,9 @@ def discover(trace: Trace) -> Result:
             result.considered.append(row)
             if dbic < -MIN_DELTA_BIC and gain >= MIN_REDUCTION_ADHESION:
                 params = {"mu0": x[0], "K": x[1], "K_rozv": x[2]}
-                extra = list(x[3:])
+                if fit.n_law == 4:
+                    params["recovery_gain"] = x[3]
+                extra = list(x[fit.n_law :])
                 axle_f = extra[: trace.n_axles - 1] if trial["per_axle"] else []
                 rest = extra[len(axle_f) :]
                 pitch = rest[:1] if trial["load_transfer"] else []
@@ -540,6 +571,13 @@ def discover(trace: Trace) -> Result:
             cat = {"per_axle": "adhesion_per_axle", "load_transfer": "load_transfer",
                    "position": "adhesion_position"}[cand]  # fmt: skip
             step = Step(cat, cat, "adhesion_fit_kN", params, rmse0, rmse1, dbic)
+            result.adhesion_law.update(
+                {
+                    k: float(params[k])
+                    for k in ("mu0", "K", "K_rozv", "recovery_gain")
+                    if k in params
+                }
+            )
             result.errors_after["adhesion_fit_kN"] = rmse1
         else:
             residual[cand.channel] = new

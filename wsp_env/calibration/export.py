@@ -3,7 +3,8 @@
 ``export_config(PATH, ...)`` writes two files:
 
 * ``PATH`` — a rail table (the ``configs/rails.yaml`` schema) with one entry, ``calibrated``:
-  the seed 000 Eq. 9 law fitted to the trace's critical points;
+  the seed 000 Eq. 9 law fitted to the trace's critical points (with seed 002 recovery when
+  the data call for it);
 * ``PATH.options.yaml`` — the ``reset`` options the discovered effects translate into
   (gradient, pad friction, per-axle adhesion, non-wheel brake force).
 
@@ -24,7 +25,13 @@ import yaml
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from wsp_env.calibration.adhesion_estimate import eq9, estimate_adhesion, fit_polach
+from wsp_env.calibration.adhesion_estimate import (
+    RECOVERY_TAU_S,
+    RECOVERY_ZETA,
+    eq9,
+    estimate_adhesion,
+    fit_polach,
+)
 from wsp_env.calibration.discovery import Result
 from wsp_env.calibration.residuals import channels
 from wsp_env.calibration.traces import Trace
@@ -51,37 +58,50 @@ def scenario_options(result: Result) -> dict[str, Any]:
 
 
 def export_config(path: str | Path, trace: Trace, result: Result) -> tuple[Path, Path]:
-    """Write ``PATH`` (rail table) and ``PATH.options.yaml`` (reset options)."""
+    """Write ``PATH`` (rail table) and ``PATH.options.yaml`` (reset options).
+
+    The rail is the calibrated adhesion law (``Result.adhesion_law``: the pooled Eq. 9 fit, with
+    the last adhesion effect's joint refit) as a ``polach_simple`` rail, its level that of the
+    grippiest axle when per-axle factors are exported (they are normalised to it), and seed
+    002's recovery on the sliding-power basis when the base law has it.
+    """
     target = Path(path)
-    fits = [fit_polach(a) for a in estimate_adhesion(trace)]
-    ok = [f for f in fits if np.isfinite(f.mu0)]
-    if not ok:
+    law = result.adhesion_law
+    if not np.isfinite(law.get("mu0", np.nan)):
         raise ValueError(f"{trace.path}: too few critical points to fit an adhesion law")
-    mu0 = float(np.median([f.mu0 for f in ok]))
-    if "axle_mu_factor" in scenario_options(result):  # the law of the best axle
-        mu0 = float(max(f.mu0 for f in ok))
-    rail = {
-        "calibrated": {
-            "law": "polach_simple",
-            "law_params": {
-                "K": float(np.median([f.K for f in ok])),
-                "K_rozv_per_kmh": float(np.median([f.K_rozv for f in ok])),
-            },
-            "mu_clean": max(0.2, mu0),
-            "mu_contaminated": mu0,
-            "mu_contaminated_range": [mu0, mu0],
-            "contamination": 1.0,
-            "clean_energy_J_per_m": float("inf"),
-        }
+    opts = scenario_options(result)
+    mu0 = float(law["mu0"])
+    if "axle_mu_factor" in opts:  # factors normalised to the grippiest axle
+        step = next(s for s in result.added if s.category == "adhesion_per_axle")
+        factors = [1.0] + [v for k, v in step.parameters.items() if k.endswith("_factor")]
+        mu0 = float(mu0 * max(factors))
+    rail: dict[str, Any] = {
+        "law": "polach_simple",
+        "law_params": {"K": float(law["K"]), "K_rozv_per_kmh": float(law["K_rozv"])},
+        "mu_clean": max(0.2, mu0),
+        "mu_contaminated": mu0,
+        "mu_contaminated_range": [mu0, mu0],
+        "contamination": 1.0,
+        "clean_energy_J_per_m": float("inf"),
     }
+    if "recovery_w_lim_kW" in law:
+        rail["recovery"] = {
+            "w_lim": 1e3 * float(law["recovery_w_lim_kW"]),
+            "w_max": 1e3 * float(law["recovery_w_max_kW"]),
+            "gain": float(law["recovery_gain"]),
+            "tau_s": RECOVERY_TAU_S,
+            "zeta": RECOVERY_ZETA,
+            "basis": "sliding_power",
+        }
+    rail = {"calibrated": rail}
     header = (
-        f"# Calibrated from {trace.path} by wsp-env calibrate (seed 000 Eq. 9 fitted to the\n"
-        f"# critical points; median over {len(ok)} axles). Scenario options: "
-        f"{target.name}.options.yaml\n"
+        f"# Calibrated from {trace.path} by wsp-env calibrate (seed 000 Eq. 9 fitted to all\n"
+        f"# axles' critical points{', with recovery' if 'recovery' in rail['calibrated'] else ''}"
+        f"). Scenario options: {target.name}.options.yaml\n"
     )
     text = header + yaml.safe_dump(rail, sort_keys=False)
     opts_path = target.with_name(target.name + ".options.yaml")
-    opts_text = yaml.safe_dump(scenario_options(result), sort_keys=True)
+    opts_text = yaml.safe_dump(opts, sort_keys=True)
     target.parent.mkdir(parents=True, exist_ok=True)
     write_atomically(target, lambda fh: fh.write(text))
     write_atomically(opts_path, lambda fh: fh.write(opts_text))

@@ -14,7 +14,8 @@ model on measured quantities and tests one equation:
   friction, unmeasured brake forces, pressure lag, ground-speed sensor errors. Its floor is
   about the sensor noise.
 * **adhesion fit** (kN): the adhesion force at each critical point (``adhesion_estimate``)
-  against the force of one Eq. 9 law fitted to all axles' critical points. Sees
+  against the force of one Eq. 9 law fitted to all axles' critical points, with seed 002's
+  recovery where the data call for it (``fit_base_law``). Sees
   position-dependent adhesion, load transfer, per-axle differences (cleaning).
 * **coasting creep** (%): apparent creepage ``(V - v_i) / V`` of each axle while it is unbraked
   (the nominal model says 0). Sees wheel-radius errors and ground-speed sensor bias.
@@ -26,7 +27,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from wsp_env.calibration.adhesion_estimate import fit_law, pooled_points
+from wsp_env.calibration.adhesion_estimate import fit_base_law, pooled_points
 from wsp_env.calibration.traces import Trace
 
 MIN_SPEED_KMH = 10.0
@@ -134,15 +135,22 @@ def adhesion_fit(trace: Trace) -> Channel:
     residual (kN) sits at each point's sample (``mask`` marks them). The RMSE is weighted by
     each point's effective variance (``adhesion_estimate``)."""
     pts = pooled_points(trace, MIN_SPEED_KMH)
-    fit = fit_law(pts)
+    base = fit_base_law(trace, pts)
     residual = np.zeros_like(trace.p_cyl_bar)
     mask = np.zeros(residual.shape, dtype=bool)
-    if fit is None:
+    if base is None:
         return Channel("adhesion_fit", "kN", residual, mask, float("nan"))
+    fit = base.fit
     residual[pts.sample, pts.axle] = fit.residual_kN
     mask[pts.sample, pts.axle] = True
     mu0, K, k_rozv = (float(x) for x in fit.params[:3])
     detail = {"mu0": mu0, "K": K, "K_rozv": k_rozv, "chi2": fit.chi2}
+    if base.recovery_kW is not None:
+        detail.update(
+            recovery_w_lim_kW=base.recovery_kW[0],
+            recovery_w_max_kW=sum(base.recovery_kW),
+            recovery_gain=float(fit.params[3]),
+        )
     return Channel("adhesion_fit", "kN", residual, mask, fit.rmse, detail)
 
 

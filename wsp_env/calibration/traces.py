@@ -105,9 +105,16 @@ def _read_meta(csv_path: Path) -> tuple[Path, dict[str, Any]]:
         raise _fail(meta_path, "sample_period_s: missing or not a positive number")
     if meta.get("contaminant", "unknown") not in CONTAMINANTS:
         raise _fail(meta_path, f"contaminant: {meta['contaminant']!r} not one of {CONTAMINANTS}")
-    loads = veh.get("axle_static_load_kN")
-    if loads is not None and (not isinstance(loads, list) or len(loads) != veh["n_axles"]):
-        raise _fail(meta_path, "vehicle.axle_static_load_kN: must list one load per axle")
+    for key in ("axle_static_load_kN", "axle_load_transfer_kN_per_mps2"):
+        per_axle = veh.get(key)
+        if per_axle is None:
+            continue
+        if (
+            not isinstance(per_axle, list)
+            or len(per_axle) != veh["n_axles"]
+            or not all(isinstance(x, int | float) and math.isfinite(x) for x in per_axle)
+        ):
+            raise _fail(meta_path, f"vehicle.{key}: must list one number per axle")
     return meta_path, meta
 
 
