@@ -22,6 +22,7 @@ demo: $(STAMP)
 		--report runs/demo/calibration --export runs/demo/calibrated.yaml
 	$(BIN)/wsp-env evaluate --policy classical --policy none --policy oracle --suite quick \
 		--json runs/demo/evaluate.json --report runs/demo/report
+	$(BIN)/wsp-env validate --json runs/demo/validate.json --report runs/demo/validate
 
 test: $(STAMP)
 	$(BIN)/ruff check .

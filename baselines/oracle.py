@@ -1,13 +1,21 @@
-"""Oracle: privileged controller that holds every axle at the peak of its current adhesion curve.
+"""Oracle: the best privileged constant-target-slip controller, found per run by a sweep.
 
-It reads the simulator's true state (train speed, each axle's friction level, recovery state
-and contact stiffness) — no real WSP can — finds the creepage ``xi*`` where the axle's current
-curve ``mu(xi, DV = xi V)`` peaks (a 64-point log grid refined by a parabola), and commands the
-brake torque that holds the wheel there:
-``T* = mu(xi*) N r + J a (1 - xi*) / r + K (v_wheel - (1 - xi*) V)``
-(adhesion at the peak, the torque that decelerates the wheelset with the train, and a
-proportional correction on the wheel-speed error), converted to a pressure request through the
-brake's torque law. It is the upper reference showing how much any controller could still gain.
+``SlipTracker`` reads the simulator's true state — train speed, each axle's friction level,
+recovery state and contact stiffness; no real WSP can — and commands the brake torque that
+holds each axle at a target creepage ``xi*``:
+``T* = mu(xi*) N r + J a (1 - xi*) / r + K N r (v_wheel - (1 - xi*) V) / V``
+(the adhesion of the axle's current curve at ``xi*``, the torque that decelerates the wheelset
+with the train, and a proportional correction on the wheel-speed error), converted to a
+pressure request by the inverse brake law (``brake.pressure_for_torque``). The target is either
+the creepage where the axle's current curve peaks (``target=None``: peak tracking) or
+``xi* = max(creep, slide_kmh / V)``: a constant creep or a constant sliding speed.
+
+``Oracle`` is a sweep over those targets (``TARGETS``): ``evaluation.run_suite`` runs every
+variant on the same scenarios and seeds through the same code path and keeps, per run, the
+shortest stop among the variants that meet the run's wheel-damage criteria (lock, sliding
+energy, slide duration). It is an upper reference for controllers that hold a slip, not a proof
+of optimality: a controller that times its slips (lets an axle slide to clean the rail, then
+holds the peak) may still beat it.
 """
 
 from __future__ import annotations
@@ -18,56 +26,78 @@ import numpy as np
 from numba import njit
 
 from wsp_env.physics import layout as L
-from wsp_env.physics.adhesion import peak_adhesion
+from wsp_env.physics.adhesion import adhesion, peak_adhesion
+from wsp_env.physics.brake import pad_factor, pressure_for_torque
+from wsp_env.physics.rail import creep_stiffness, effective_removal, recovered_level
+
+# (creep, sliding speed km/h) targets of the sweep; None = track the peak of the current curve
+TARGETS: tuple[tuple[float, float] | None, ...] = (
+    None,
+    (0.0, 1.0),
+    (0.0, 2.0),
+    (0.0, 3.0),
+    (0.0, 5.0),
+    (0.0, 8.0),
+    (0.03, 0.0),
+    (0.06, 0.0),
+    (0.10, 0.0),
+    (0.15, 0.0),
+)
+DAMAGE_CHECKS = ("lock", "sliding_energy", "slide_duration")
 
 
 @njit(cache=True, error_model="numpy")
-def oracle_pressures(env_par, axle_par, env_state, axle_state, gain_k, out):
-    """Requested cylinder pressure (bar) per axle for every environment."""
+def tracker_pressures(env_par, axle_par, env_state, axle_state, peak, creep, slide, gain_k, out):
+    """Requested cylinder pressure (bar) per axle for every environment (module docstring)."""
     for e in range(env_par.shape[0]):
         v = env_state[e, L.ES_V]
+        v_c = max(v, 0.1)
         decel = env_state[e, L.ES_DECEL]
         law = int(env_par[e, L.EP_LAW])
-        mu_clean = env_par[e, L.EP_MU_CLEAN]
-        pad = env_par[e, L.EP_PAD_SCALE] * max(
-            0.2, 1.0 + env_par[e, L.EP_PAD_SLOPE] * (v - env_par[e, L.EP_PAD_VREF])
-        )
+        pad = pad_factor(env_par, e, v)
+        lp0, lp1 = env_par[e, L.EP_LP0], env_par[e, L.EP_LP1]
+        lp2, lp3 = env_par[e, L.EP_LP2], env_par[e, L.EP_LP3]
         for k in range(axle_par.shape[1]):
             level = axle_state[e, k, L.AS_MU_LEVEL]
-            factor = axle_par[e, k, L.AP_MU_FACTOR]
-            mu_rec = max(level, min(env_par[e, L.EP_REC_GAIN] * level, mu_clean * factor))
-            kw = min(1.0, max(0.0, axle_state[e, k, L.AS_KW])) * axle_state[e, k, L.AS_CONT]
+            mu_rec = recovered_level(env_par, e, level, axle_par[e, k, L.AP_MU_FACTOR])
+            kw = effective_removal(axle_state[e, k, L.AS_KW], axle_state[e, k, L.AS_CONT])
             n = axle_state[e, k, L.AS_N]
             k_n = axle_state[e, k, L.AS_STIFF]
             if k_n <= 0.0:  # before the first step: static load
                 n = axle_par[e, k, L.AP_N_STATIC]
-                k_n = axle_par[e, k, L.AP_STIFF] / n
-            xi, mu = peak_adhesion(
-                law, level, mu_rec, kw, k_n, 1.0 / k_n, max(v, 0.1),
-                env_par[e, L.EP_LP0], env_par[e, L.EP_LP1], env_par[e, L.EP_LP2],
-                env_par[e, L.EP_LP3],
-            )  # fmt: skip
+                k_n = creep_stiffness(env_par, axle_par, e, k, n) / n
+            if peak:
+                xi, mu = peak_adhesion(law, level, mu_rec, kw, k_n, 1.0 / k_n, v_c,
+                                       lp0, lp1, lp2, lp3)  # fmt: skip
+            else:
+                xi = min(0.95, max(creep, slide / v_c))
+                mu = adhesion(law, xi, xi * v_c, level, mu_rec, kw, k_n, 1.0 / k_n,
+                              lp0, lp1, lp2, lp3)[0]  # fmt: skip
             r = axle_par[e, k, L.AP_RADIUS]
             wheel = axle_state[e, k, L.AS_OMEGA] * r
-            target_wheel = (1.0 - xi) * v
             torque = (
                 mu * n * r
                 + axle_par[e, k, L.AP_INERTIA] * decel * (1.0 - xi) / r
-                + gain_k * n * r * (wheel - target_wheel) / max(v, 1.0)
+                + gain_k * n * r * (wheel - (1.0 - xi) * v) / max(v, 1.0)
             )
-            out[e, k] = (
-                torque / (axle_par[e, k, L.AP_BRAKE_GAIN] * pad) + axle_par[e, k, L.AP_P_THRESH]
-            )
+            out[e, k] = pressure_for_torque(axle_par, e, k, torque, pad)
 
 
-class OraclePolicy:
-    """Holds every axle at its adhesion peak using the simulator's true state (privileged)."""
+class SlipTracker:
+    """Holds every axle at a target creepage using the simulator's true state (privileged)."""
 
-    name = "oracle"
     privileged = True
 
-    def __init__(self, feedback_gain: float = 2.0) -> None:
+    def __init__(
+        self, target: tuple[float, float] | None = None, feedback_gain: float = 2.0
+    ) -> None:
+        self.target = target
         self.feedback_gain = feedback_gain
+        if target is None:
+            self.name = "oracle_peak"
+        else:
+            creep, slide_kmh = target
+            self.name = f"oracle_creep{creep:g}" if creep else f"oracle_slide{slide_kmh:g}kmh"
 
     def bind(self, core: Any) -> None:
         self.core = core
@@ -79,10 +109,35 @@ class OraclePolicy:
 
     def act(self, obs: np.ndarray) -> np.ndarray:
         sim = self.core.sim
-        oracle_pressures(
-            sim.env_par, sim.axle_par, sim.env_state, sim.axle_state, self.feedback_gain, self._p
-        )
+        creep, slide_kmh = self.target or (0.0, 0.0)
+        tracker_pressures(
+            sim.env_par, sim.axle_par, sim.env_state, sim.axle_state, self.target is None,
+            creep, slide_kmh / 3.6, self.feedback_gain, self._p,
+        )  # fmt: skip
         demand = sim.demand_bar()[:, None]
         frac = np.where(demand > 1e-6, self._p / np.maximum(demand, 1e-6), 1.0)
         frac = np.minimum.reduceat(frac, self.valve_starts, axis=1)
         return np.clip(2.0 * frac - 1.0, -1.0, 1.0).astype(np.float32)
+
+
+class Oracle:
+    """The sweep of ``SlipTracker`` targets, best per run (module docstring)."""
+
+    name = "oracle"
+    privileged = True
+
+    def __init__(self, targets: tuple[tuple[float, float] | None, ...] = TARGETS) -> None:
+        self.targets = targets
+
+    def variants(self) -> list[SlipTracker]:
+        return [SlipTracker(t) for t in self.targets]
+
+    @staticmethod
+    def choose(candidates: list[dict[str, Any]]) -> dict[str, Any]:
+        """The shortest stop among the variants' results that meet the damage criteria."""
+
+        def key(r: dict[str, Any]) -> tuple[bool, float]:
+            damage_ok = all(r["checks"].get(c, True) for c in DAMAGE_CHECKS) and r["stopped"]
+            return (not damage_ok, r["stopping_distance_m"])
+
+        return min(candidates, key=key)

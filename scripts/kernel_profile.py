@@ -29,7 +29,7 @@ VARIANTS = {
             "m, m_xi, m_w = min(axi * 30.0, level), 30.0, 0.0",
         )
     ],
-    "recovery off": [("recovery_on = w_span > 0.0 and w_lim < 1e300", "recovery_on = False")],
+    "recovery off": [("recovery_on = recovers(env_par, e)", "recovery_on = False")],
     "no zero-creep re-linearisation": [
         ("if (v_c - (omega + d_omega) * r) * dv < 0.0:", "if False:")
     ],

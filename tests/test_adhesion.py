@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import single
+from conftest import instant_brake, single
 
 from wsp_env.config import load_rail, load_vehicle
 from wsp_env.physics import adhesion as A
@@ -133,7 +133,8 @@ def test_tustin_filter_step_response_matches_eq11():
 
 
 def _locked_soap_run(w_lim: float, w_max: float):
-    """One axle-set sliding hard on soap (brake torque far above adhesion), recovery on."""
+    """A UIC-Z1 on soap braked at full demand from t = 0 (a step: the slide starts at once),
+    recovery on, no cleaning."""
     import dataclasses
 
     rail = load_rail("soap")
@@ -143,30 +144,35 @@ def _locked_soap_run(w_lim: float, w_max: float):
         clean_energy_J_per_m=math.inf,
         pass_removal=0.0,
     )
-    sim = single(load_vehicle("uic_z1"), rail, 120.0)
-    return sim
+    return single(instant_brake("uic_z1"), rail, 120.0, mu_contaminated=0.08)
+
+
+def _falloff(sim) -> float:
+    """The soap law's sliding-speed fall-off at axle 1's current sliding speed."""
+    rail = load_rail("soap")
+    w = sim.speed_mps[0] - sim.wheel_speed_mps[0, 0]
+    return A.sliding_falloff(w, rail.law_params["A"], rail.law_params["B"])[0]
 
 
 def test_recovery_drives_mu_to_mu_rec_with_eq11_step_response():
-    """Sliding power far above W_max: the used adhesion goes from K_red mu_c to mu_rec."""
+    """Sliding power far above W_max from the first period: K_W follows Eq. 11's step response
+    and the used adhesion goes to mu_rec (Table 5: 0.10) times the sliding-speed fall-off."""
     sim = _locked_soap_run(1600.0, 7800.0)
     kw_seen = []
-    mu_seen = []
     for _ in range(400):
         sim.step()
         kw_seen.append(sim.axle_state[0, 0, L.AS_KW])
-        mu_seen.append(sim.axle_state[0, 0, L.AS_MU])
     kw = np.array(kw_seen)
     start = int(np.argmax(kw > 1e-3))
-    # once the slide is established (power >> W_max) K_W follows the step response
-    # the input ramps up as the slide develops, so K_W lags the ideal step response
-    # 1 - (1 + t/tau) e^(-t/tau) (0.908 at 0.4 s) a little, and must never lead it
+    # the input steps to 1 within a period or two; K_W lags the ideal step response
+    # 1 - (1 + t/tau) e^(-t/tau) (0.908 at 0.4 s) by at most that, and never leads it
     t = 0.02 * np.arange(1, 41)
     ideal = 1 - (1 + t / 0.1) * np.exp(-t / 0.1)
     assert (kw[start : start + 40] <= ideal + 1e-3).all()
-    assert kw[start + 20] > 0.75
+    assert kw[start + 20] > 0.85
     assert kw[start + 60] > 0.99
-    assert mu_seen[-1] == pytest.approx(1.25 * 0.08, rel=0.02)  # mu_rec (Table 5: 0.10)
+    mu = abs(sim.axle_state[0, 0, L.AS_MU])
+    assert mu == pytest.approx(1.25 * 0.08 * _falloff(sim), rel=0.02)
 
 
 def test_below_w_lim_nothing_recovers():
@@ -174,8 +180,41 @@ def test_below_w_lim_nothing_recovers():
     for _ in range(400):
         sim.step()
         assert (sim.axle_state[0, :, L.AS_KW] == 0.0).all()
-    # sliding on the degraded law: K_red * mu_c
-    assert abs(sim.axle_state[0, 0, L.AS_MU]) == pytest.approx(0.65 * 0.08, rel=0.02)
+    # sliding on the degraded law: K_red * mu_c, times the fall-off
+    mu = abs(sim.axle_state[0, 0, L.AS_MU])
+    assert mu == pytest.approx(0.65 * 0.08 * _falloff(sim), rel=0.02)
+
+
+def test_sliding_falloff_lies_in_seed000_table4_envelope():
+    """Seed 000 Table 4 fits mu0 / (1 + K_rozv DV), K_rozv 0.0286-0.0325 per km/h (recovery
+    included): the soap fall-off stays inside that envelope over the 0-20 km/h of sliding the
+    measurement saw (2e-3 for rounding), and tends to A (0.4) at a locked wheel's speeds."""
+    rail = load_rail("soap")
+    a, b = rail.law_params["A"], rail.law_params["B"]
+    dv_kmh = np.linspace(0.0, 20.0, 81)
+    g = np.array([A.sliding_falloff(x / 3.6, a, b)[0] for x in dv_kmh])
+    assert np.all(g >= 1 / (1 + 0.0325 * dv_kmh) - 2e-3)
+    assert np.all(g <= 1 / (1 + 0.0286 * dv_kmh) + 2e-3)
+    assert A.sliding_falloff(33.3, a, b)[0] == pytest.approx(a, abs=0.01)
+
+
+def test_sliding_costs_the_wheel_that_slides():
+    """The soap contact at full recovery: friction falls with sliding speed, so at a locked
+    wheel's sliding speeds (>= 10 m/s) it is below the degraded curve's peak mu_c — the recovery
+    Table 5 grants cannot make a lock the best a wheel can do."""
+    rail = load_rail("soap")
+    params = (rail.law_params["K_red"], rail.law_params["lambda"], rail.law_params["A"],
+              rail.law_params["B"])  # fmt: skip
+    mu_c, mu_rec = 0.08, 0.10
+    k = rail.creep_stiffness_factor * CA / N
+    peak = A.peak_adhesion(A.LAW_SEED002, mu_c, mu_rec, 0.0, k, 1 / k, 30.0, *params)[1]
+    assert 0.95 * mu_c < peak <= mu_c  # the fall-off trims it a little at the peak's creep
+    for w in (10.0, 20.0, 33.0):  # locked wheel at 36, 72, 120 km/h
+        locked = A.adhesion(A.LAW_SEED002, 1.0, w, mu_c, mu_rec, 1.0, k, 1 / k, *params)[0]
+        assert locked < 0.8 * peak
+    # and sliding at a few km/h with full recovery beats the peak: moderate slip pays
+    slow = A.adhesion(A.LAW_SEED002, 0.05, 1.0, mu_c, mu_rec, 1.0, k, 1 / k, *params)[0]
+    assert slow > peak
 
 
 @pytest.mark.parametrize("speed", [120.0, 160.0])

@@ -1,19 +1,18 @@
-"""Classical WSP, suites, metrics and `wsp-env evaluate`; the seed 002 braking-test reproduction."""
+"""Classical WSP, oracle, suites, EN 15595-style metrics and criteria, `wsp-env evaluate`."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
 import pytest
 
-from wsp_env.baselines.classical import ClassicalWSP, load_wsp_config
+from wsp_env.baselines.classical import load_wsp_config
 from wsp_env.cli import main
-from wsp_env.config import ConfigError, _configs_root
-from wsp_env.evaluation import load_suite, run_suite, summarise
+from wsp_env.config import ConfigError, load_vehicle
+from wsp_env.evaluation import CaseConfig, SuiteConfig, load_suite, run_suite, summarise
 from wsp_env.policy import NoWSP, make_policy
-
-TABLE6 = 0.5 * (np.array([13.08, 13.36, 13.09, 13.52]) + np.array([12.78, 12.06, 13.20, 13.43]))
 
 
 @pytest.fixture(scope="module")
@@ -39,12 +38,82 @@ def test_classical_stops_within_the_extension_criterion_on_low_adhesion(quick_re
     assert all(r["stopped"] for r in quick_results["classical"])
 
 
-def test_oracle_uses_the_available_adhesion(quick_results):
-    """The privileged peak-holder stops within a few % of the reference distance, no sliding."""
-    for r in quick_results["oracle"]:
-        if r["conditions"]["rail"] in ("soap", "leaves") and not r["conditions"]["sections"]:
-            assert abs(r["adhesion_utilisation"] - 1.0) < 0.05
-        assert r["max_lock_s"] == 0.0
+def test_oracle_is_the_best_constant_slip_under_the_damage_criteria(quick_results):
+    """The oracle sweep meets the damage criteria everywhere and stops no longer than the
+    classical WSP (it may pick the classical WSP's own kind of slip)."""
+    for o, c in zip(quick_results["oracle"], quick_results["classical"], strict=True):
+        assert all(o["checks"][k] for k in ("lock", "sliding_energy", "slide_duration"))
+        assert o["stopping_distance_m"] <= 1.01 * c["stopping_distance_m"], o["scenario"]
+        assert o["oracle_variant"].startswith("oracle_")
+
+
+def test_peak_tracking_meets_the_available_adhesion_reference():
+    """Holding every axle at its curve's peak (no sliding: no recovery) is the ideal the
+    available-adhesion reference integrates: the two stops agree within 5 % (the tracker is a
+    little shorter: rolling passes clean 1 % of the soap per axle, and load transfer)."""
+    from wsp_env.baselines.oracle import SlipTracker
+
+    suite = load_suite("quick")
+    cases = tuple(c for c in suite.cases if c.rail in ("soap", "leaves") and c.pattern == "uniform")
+    res, _ = run_suite("uic_z1", dataclasses.replace(suite, cases=cases), SlipTracker(None))
+    for r in res:
+        assert r["stopping_distance_m"] == pytest.approx(r["reference_distance_m"], rel=0.05)
+        assert r["max_sliding_kmh"] < 5.0 and r["max_lock_s"] == 0.0
+
+
+def test_dry_reference_and_deceleration_distance():
+    """On dry rail without WSP the run *is* its dry reference: increase 0; the equivalent
+    build-up time is the demand's delay plus half its rise (EN 14531)."""
+    veh = load_vehicle("uic_z1")
+    suite = SuiteConfig(name="d", description="", seeds=(3,), cases=(
+        CaseConfig(name="dry", rail="dry", speeds_kmh=("120",), pattern="uniform"),
+        CaseConfig(name="soap", rail="soap", speeds_kmh=("120",), mu_contaminated=0.07),
+    ))  # fmt: skip
+    (dry, soap), _ = run_suite(veh, suite, NoWSP(), record="none")
+    assert dry["stopping_distance_m"] == pytest.approx(dry["dry_reference_distance_m"], rel=1e-9)
+    assert abs(dry["deceleration_distance_increase_pct"]) < 1e-6
+    t_e = veh.brake.demand_delay_s + veh.brake.demand_rise_s / 2
+    assert dry["equivalent_build_up_time_s"] == pytest.approx(t_e)
+    v0 = 120 / 3.6
+    assert dry["deceleration_distance_m"] == pytest.approx(
+        dry["stopping_distance_m"] - v0 * t_e, rel=1e-9
+    )
+    assert soap["deceleration_distance_increase_pct"] > 50.0  # locked wheels on soap
+    assert soap["dry_reference_distance_m"] == pytest.approx(dry["dry_reference_distance_m"],
+                                                              rel=0.05)  # fmt: skip
+
+
+def test_damage_criteria_fail_locked_wheels_not_the_wsp(quick_results):
+    """Locked wheels fail the lock criterion on every run; the classical WSP's longest lock
+    (a wheel stopping just before the train as it hands back the full demand below 3 km/h)
+    is a small fraction of theirs, its worst axle's sliding energy a third at most."""
+    for c, n in zip(quick_results["classical"], quick_results["none"], strict=True):
+        assert not n["checks"]["lock"] and not n["passed"]
+        assert c["max_lock_s"] < 0.1 * n["max_lock_s"] and c["checks"]["sliding_energy"]
+        assert n["max_axle_sliding_energy_pct"] > 3 * c["max_axle_sliding_energy_pct"]
+        for key in ("max_sliding_kmh", "longest_slide_s", "valve_cycles", "vent_time_s"):
+            assert key in c and all(key in a for a in c["axles"])
+        assert 0.0 < c["adhesion_utilisation"] <= 1.0 and 0.0 < n["adhesion_utilisation"] <= 1.0
+
+
+def test_reference_speed_error_is_reported_for_the_classical_wsp(quick_results):
+    for c, n in zip(quick_results["classical"], quick_results["none"], strict=True):
+        assert "reference_speed_error_rms_kmh" not in n  # no estimate, no error
+        assert 0.0 <= c["reference_speed_error_rms_kmh"] <= c["reference_speed_error_max_kmh"]
+        assert c["reference_speed_error_rms_kmh"] < 5.0
+
+
+def test_suite_cases_carry_their_vehicle_and_load():
+    suite = SuiteConfig(name="m", description="", seeds=(0,), cases=(
+        CaseConfig(name="coach", rail="soap", speeds_kmh=("80",), load="laden"),
+        CaseConfig(name="train", rail="soap", speeds_kmh=("80",), vehicle="regiolis",
+                   load="tare"),
+    ))  # fmt: skip
+    (coach, train), _ = run_suite("uic_z1", suite, NoWSP(), record="none")
+    assert coach["vehicle"] == "uic_z1" and train["vehicle"] == "regiolis"
+    assert coach["conditions"]["load_factor"] == 1.15
+    assert train["conditions"]["load_factor"] == 0.85
+    assert len(train["axles"]) == 16
 
 
 def test_results_are_reproducible():
@@ -70,6 +139,8 @@ def test_evaluate_cli_json_and_report(tmp_path):
     run = data["runs"][0]
     keys = ("scenario", "seed", "stopping_distance_m", "reference_distance_m")
     keys += ("adhesion_utilisation", "sliding_energy_kJ", "air_litres", "max_lock_s")
+    keys += ("dry_reference_distance_m", "deceleration_distance_increase_pct")
+    keys += ("max_sliding_kmh", "passed")
     for key in keys:
         assert key in run
     assert set(data["summary"]) == {"classical", "none"}
@@ -110,14 +181,29 @@ def test_no_wsp_policy_is_full_demand():
     assert (p.act(np.zeros((3, 10))) == 1.0).all()
 
 
-def test_seed002_braking_test_reproduction():
-    """Seed 002 §5.2: stop within 5 % of 725 m (Table 7), each axle's mean sliding within
-    2 km/h of Table 6 (mean of tests B1, B2), Table 5 held fixed; WSP thresholds and R_i tuned
-    (configs/wsp/seed002_uic_z1.yaml, configs/scenarios/seed002_braking.yaml)."""
-    wsp = load_wsp_config(_configs_root() / "wsp" / "seed002_uic_z1.yaml")
-    result = run_suite("uic_z1", load_suite("seed002_braking"), ClassicalWSP(wsp), record="none")[
-        0
-    ][0]
-    assert result["stopping_distance_m"] == pytest.approx(725.0, rel=0.05)
-    slide = np.array([a["mean_sliding_kmh"] for a in result["axles"]])
-    assert np.all(np.abs(slide - TABLE6) <= 2.0), slide
+def test_classical_wsp_reapplies_in_steps_and_stays_silent_on_dry_rail():
+    """After a vent the WSP fills in pulses (apply, hold, apply, ...) below the demand; on dry
+    rail it never leaves apply (its reference follows the train: no false slide)."""
+    from wsp_env.baselines.classical import ClassicalWSP
+    from wsp_env.env import WSPBrakingVectorEnv
+
+    def actions(rail):
+        venv = WSPBrakingVectorEnv(num_envs=1, vehicle="uic_z1")
+        venv.reset(seed=0, options={"rail": rail, "speed_kmh": 100.0, "pattern": "uniform"})
+        wsp = ClassicalWSP(load_wsp_config())
+        wsp.bind(venv.core)
+        wsp.reset(np.arange(1))
+        seen = []
+        while True:
+            a = wsp.act(venv.core.obs)
+            seen.append(a[0, 0])
+            _, _, term, trunc, _ = venv.step(a)
+            if term[0] or trunc[0]:
+                return np.array(seen)
+
+    assert np.all(actions("dry") == 1.0)
+    soap = actions("soap")
+    apply_, hold = soap == 1.0, (soap > -1.0) & (soap < 1.0)
+    # pulses: a hold directly after an apply and an apply directly after a hold, many times
+    assert np.sum(apply_[:-1] & hold[1:]) > 10 and np.sum(hold[:-1] & apply_[1:]) > 10
+    assert np.any(soap == -1.0)

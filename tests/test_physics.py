@@ -18,13 +18,15 @@ KMH = 1 / 3.6
 
 
 def rigid_body_decel(veh) -> float:
-    """Deceleration of a train whose wheels roll: sum(T/r) / (M + sum J/r^2)."""
+    """Deceleration of a train whose wheels roll: sum(T/r) / (M + sum J/r^2); the motor axles'
+    torque includes their blended ED brake (``ed_brake_force_kN`` at the wheel)."""
     gain, p_th = veh.brake.linear_torque()
-    torque = gain * (veh.brake.p_max_bar - p_th)
     n, r, J = veh.n_axles, veh.wheel_radius_m, veh.wheelset_inertia_kgm2
+    ed_N = sum(b.ed_brake_force_kN * 1e3 * b.n_axles for b in veh.bogies)
+    force = n * gain * (veh.brake.p_max_bar - p_th) / r + ed_N
     arrays = TrainSim(veh).arrays
     m = arrays.body_mass_kg + arrays.rest_mass_kg
-    return n * torque / r / (m + n * J / r**2)
+    return force / (m + n * J / r**2)
 
 
 @pytest.mark.parametrize("vehicle_id", ["uic_z1", "etr1000"])

@@ -18,9 +18,12 @@ PACKAGE = Path(__file__).resolve().parent
 KERNEL_SOURCES = (
     "physics/layout.py",
     "physics/adhesion.py",
+    "physics/brake.py",
+    "physics/rail.py",
     "physics/integrator.py",
     "env_kernel.py",
     "reference.py",
+    "baselines/oracle.py",  # installed as wsp_env.baselines; ../baselines in a checkout
 )
 STAMP_NAME = "wsp_env_kernels.sha256"
 
@@ -28,10 +31,11 @@ STAMP_NAME = "wsp_env_kernels.sha256"
 def _digest() -> str:
     h = hashlib.sha256()
     for rel in KERNEL_SOURCES:
-        path = PACKAGE / rel
         h.update(rel.encode())
-        if path.exists():
-            h.update(path.read_bytes())
+        for path in (PACKAGE / rel, PACKAGE.parent / rel):
+            if path.exists():
+                h.update(path.read_bytes())
+                break
     return h.hexdigest()
 
 

@@ -17,8 +17,6 @@ import numpy as np
 from wsp_env.config import ConfigError, load_rail, load_vehicle
 from wsp_env.trace_io import write_atomically
 
-RAILS = ("dry", "wet", "soap", "oil", "leaves")
-
 
 class UserError(Exception):
     """A mistake in the user's input; its message is printed as one line."""
@@ -84,7 +82,10 @@ def _add_simulate(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--vehicle", default="uic_z1", help="vehicle id or YAML path (uic_z1)")
     p.add_argument("--speed-kmh", type=_positive, default=120.0, help="initial speed (120)")
-    p.add_argument("--rail", default="soap", choices=RAILS, help="rail condition (soap)")
+    p.add_argument(
+        "--rail", default="soap", help="a rail of the rail table (configs/rails.yaml: dry, wet, "
+        "soap, oil, leaves, ...; or --rails-config) (soap)"
+    )  # fmt: skip
     p.add_argument("--rails-config", default=None, help="rail-condition table (YAML)")
     p.add_argument(
         "--policy",
@@ -119,7 +120,7 @@ def cmd_simulate(args: argparse.Namespace) -> dict[str, Any]:
             f"--speed-kmh: {args.speed_kmh:g} exceeds {vehicle.id}'s maximum "
             f"{vehicle.max_speed_kmh:g} km/h"
         )
-    load_rail(args.rail, args.rails_config)  # a bad table or rail fails here, named
+    rail = load_rail(args.rail, args.rails_config)  # a bad table or rail fails here, named
     try:
         policy = make_policy(args.policy, args.wsp_config)
     except FileNotFoundError as err:
@@ -157,7 +158,7 @@ def cmd_simulate(args: argparse.Namespace) -> dict[str, Any]:
         meta = trace_metadata(
             vehicle,
             conditions,
-            args.rail,
+            rail.contaminant_name(args.rail),
             args.sample_period_s,
             f"simulated {vehicle.id} {args.rail} {args.speed_kmh:g} km/h seed {args.seed}",
         )
@@ -361,6 +362,53 @@ def _print_bench(result: dict[str, Any]) -> None:
     print(format_bench(result))
 
 
+# ---- validate -------------------------------------------------------------------------------
+
+
+def _add_validate(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "validate",
+        help="run the physics' fidelity checks against the seeds (exit 1 if one fails)",
+        description="Seed 002 Tables 6-7, seed 000 Table 4 through the adhesion estimator, "
+        "locked wheels against the classical WSP on soap and leaves, and silence on dry rail. "
+        "Exit status 1 when a check fails.",
+    )
+    p.add_argument("--json", dest="json_path", default=None, help="write the result here")
+    p.add_argument("--report", default=None, help="write report.md and plots into this folder")
+    p.set_defaults(func=cmd_validate)
+
+
+def cmd_validate(args: argparse.Namespace) -> dict[str, Any]:
+    from wsp_env.validate import run_validation
+
+    return run_validation(args.report)
+
+
+def _print_validate(result: dict[str, Any]) -> None:
+    s2, s0, dry = result["seed002"], result["seed000"], result["dry_quiet"]
+    slides = ", ".join(f"{x:.1f}" for x in s2["mean_sliding_kmh"])
+    print(
+        f"seed002   {'pass' if s2['passed'] else 'FAIL'}  stop {s2['stopping_distance_m']:.1f} m "
+        f"(725 m), mean sliding [{slides}] km/h, none {s2['none_margin_pct']:+.1f} %"
+    )
+    mu0 = ", ".join(f"{x:.4f}" for x in s0["mu0"])
+    kr = ", ".join(f"{x:.4f}" for x in s0["K_rozv"])
+    print(f"seed000   {'pass' if s0['passed'] else 'FAIL'}  mu0 [{mu0}], K_rozv [{kr}]")
+    runs = [r for r in result["locked_vs_wsp"] if r["judged"]]
+    worst = min(runs, key=lambda r: r["none_m"] / r["classical_m"])
+    print(
+        f"locked    {'pass' if result['locked_vs_wsp_passed'] else 'FAIL'}  {len(runs)} runs "
+        f"with locked wheels, none / classical from {worst['none_m'] / worst['classical_m']:.3f} "
+        f"({worst['scenario']} seed {worst['seed']})"
+    )
+    print(
+        f"dry quiet {'pass' if dry['passed'] else 'FAIL'}  none {dry['none_m']:.1f} m, classical "
+        f"{dry['classical_m']:.1f} m, air {dry['classical_air_l']:.1f} l"
+    )
+    if result.get("report"):
+        print(f"wrote {result['report']}")
+
+
 # ---- entry point ----------------------------------------------------------------------------
 
 
@@ -373,6 +421,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_evaluate(sub)
     _add_calibrate(sub)
     _add_bench(sub)
+    _add_validate(sub)
     return parser
 
 
@@ -381,6 +430,7 @@ PRINTERS = {
     "evaluate": _print_evaluate,
     "calibrate": _print_calibrate,
     "bench": _print_bench,
+    "validate": _print_validate,
 }
 
 
@@ -395,6 +445,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"wsp-env {args.command}: error: {err}", file=sys.stderr)
         return 2
     PRINTERS[args.command](result)
+    if args.command == "validate" and not result["passed"]:
+        return 1  # a fidelity check failed (the result and report are written)
     return 0
 
 

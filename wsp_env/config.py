@@ -22,6 +22,8 @@ from typing import Any
 
 import yaml
 
+from wsp_env.trace_io import CONTAMINANTS  # the trace format's vocabulary of contaminants
+
 
 class ConfigError(ValueError):
     """A configuration problem; ``str(err)`` is the one-line message for the user."""
@@ -147,6 +149,9 @@ class BogieConfig:
     frame_cog_height_m: float = _pos()
     pivot_height_m: float = _pos()
     n_axles: int = field(default=2, metadata={"ge": 1})
+    # electrodynamic brake force at the wheel per axle of a motor bogie at full demand (kN);
+    # blended: it follows the axle's friction brake (the WSP valve modulates both together)
+    ed_brake_force_kN: float = _nonneg(default=0.0)
 
 
 @dataclass(frozen=True)
@@ -264,7 +269,7 @@ class VehicleConfig:
 # ---- rail / contaminant ---------------------------------------------------------------------
 
 LAWS = ("polach", "polach_simple", "seed002")
-CONTAMINANTS = ("dry", "wet", "soap", "oil", "leaves")
+
 PATTERNS = ("uniform", "step_up", "step_down", "patches")
 
 
@@ -303,24 +308,33 @@ class RailConfig:
         default_factory=lambda: RecoveryConfig(w_lim=math.inf, w_max=math.inf)
     )
     patterns: dict[str, float] = field(default_factory=lambda: {"uniform": 1.0})
+    # creep stiffness of the contaminated contact / Kalker's (physics/rail.py)
+    creep_stiffness_factor: float = field(default=1.0, metadata={"gt": 0.0, "le": 1.0})
+    # the trace format's name for this rail's contaminant; None: the rail's own name if it is one
+    contaminant: str | None = field(default=None, metadata={"choices": CONTAMINANTS})
 
     _LAW_KEYS: typing.ClassVar[dict[str, tuple[str, ...]]] = {
         "polach": ("kA", "kS", "A", "B"),
         "polach_simple": ("K", "K_rozv_per_kmh"),
-        "seed002": ("K_red", "lambda"),
+        "seed002": ("K_red", "lambda", "A", "B"),
     }
+    # optional law parameters and their defaults (seed002: no sliding-speed fall-off)
+    _LAW_DEFAULTS: typing.ClassVar[dict[str, dict[str, float]]] = {"seed002": {"A": 1.0, "B": 0.0}}
 
     def validate(self, where: str) -> None:
         prefix = f"{where}." if where else ""
         need = self._LAW_KEYS[self.law]
+        optional = self._LAW_DEFAULTS.get(self.law, {})
         for key in need:
-            if key not in self.law_params:
+            if key not in self.law_params and key not in optional:
                 raise ConfigError(f"{prefix}law_params.{key}: missing for law {self.law}")
         for key in self.law_params:
             if key not in need:
                 raise ConfigError(f"{prefix}law_params.{key}: unknown for law {self.law}")
-            if key != "A" and not self.law_params[key] >= 0:
+            if not self.law_params[key] >= 0:
                 raise ConfigError(f"{prefix}law_params.{key}: must be >= 0")
+            if key == "A" and self.law_params[key] > 1:
+                raise ConfigError(f"{prefix}law_params.A: must be <= 1 (a fraction of mu0)")
         lo, hi = self.mu_contaminated_range
         if lo > hi:
             raise ConfigError(f"{prefix}mu_contaminated_range: low end exceeds high end")
@@ -334,8 +348,15 @@ class RailConfig:
         if not sum(self.patterns.values()) > 0:
             raise ConfigError(f"{prefix}patterns: weights must not all be zero")
 
+    def contaminant_name(self, rail_name: str) -> str:
+        """The contaminant of rail ``rail_name`` as a trace's metadata names it."""
+        if self.contaminant is not None:
+            return self.contaminant
+        return rail_name if rail_name in CONTAMINANTS else "unknown"
+
     def law_vector(self) -> tuple[float, float, float, float]:
-        vals = [self.law_params[k] for k in self._LAW_KEYS[self.law]]
+        defaults = self._LAW_DEFAULTS.get(self.law, {})
+        vals = [self.law_params.get(k, defaults.get(k)) for k in self._LAW_KEYS[self.law]]
         return tuple(vals + [0.0] * (4 - len(vals)))  # type: ignore[return-value]
 
 

@@ -10,7 +10,8 @@ import math
 
 from numba import njit, prange
 
-from wsp_env.physics.integrator import INLINE_FLAGS, KERNEL_FLAGS, _step_env
+from wsp_env.physics.brake import demand_bar
+from wsp_env.physics.integrator import INLINE_FLAGS, KERNEL_FLAGS, _step_env, is_locked
 from wsp_env.physics.layout import (
     AA_AIR_L,
     AA_SLIDE_E,
@@ -20,8 +21,6 @@ from wsp_env.physics.layout import (
     AS_OMEGA,
     AS_P,
     CMD_HOLD,
-    EP_DEMAND_DELAY,
-    EP_DEMAND_RISE,
     EP_P_MAX,
     ES_STOPPED,
     ES_T,
@@ -29,27 +28,21 @@ from wsp_env.physics.layout import (
     ES_X,
 )
 
-# reward terms (columns of ``terms``); the reward is their sum
-R_DISTANCE = 0  # -dx / distance_scale: sums to -stopping_distance / distance_scale
-R_SLIDE = 1  # -w_slide * sum_i max(0, dv_i - tolerance) * dt / slide_scale
-R_LOCK = 2  # -w_lock * (number of locked axles) * dt
-R_ENERGY = 3  # -w_energy * wheel-rail sliding energy / energy_scale
-R_AIR = 4  # -w_air * vented free-air litres / air_scale
-N_TERMS = 5
+# reward terms (columns of ``terms``); the reward is their sum; every term is a cost in metres
+# of stopping distance divided by the distance scale (env.RewardConfig gives the exchange rates)
+R_DISTANCE = 0  # -dx: sums to -stopping_distance
+R_DAMAGE = 1  # -(sum_i f(E_i)) increment, f(E) = m_per_MJ E (1 + E / E_ref), E_i per axle
+R_LOCK = 2  # -lock_m_per_s * (number of locked axles) * dt
+R_AIR = 3  # -air_m_per_100l * vented free-air litres / 100
+N_TERMS = 4
 
 # reward parameters (``reward_par``)
-RP_DISTANCE_SCALE = 0  # m
-RP_W_SLIDE = 1
-RP_SLIDE_TOL_KMH = 2  # absolute tolerated sliding, km/h
-RP_SLIDE_TOL_REL = 3  # relative tolerated sliding (of the reference speed)
-RP_SLIDE_SCALE = 4  # m of excess sliding
-RP_W_LOCK = 5
-RP_W_ENERGY = 6
-RP_ENERGY_SCALE = 7  # J
-RP_W_AIR = 8
-RP_AIR_SCALE = 9  # litres
-RP_LOCK_SPEED = 10  # m/s: wheel slower than this (train faster than 1 m/s) = locked
-N_RP = 11
+RP_DISTANCE_SCALE = 0  # m: every term is divided by it
+RP_DAMAGE_M_PER_MJ = 1  # m of stopping distance per MJ of sliding energy on one axle
+RP_DAMAGE_REF_MJ = 2  # MJ per axle at which the damage cost has doubled (superlinear part)
+RP_LOCK_M_PER_S = 3  # m per second one axle is locked
+RP_AIR_M_PER_100L = 4  # m per 100 free-air litres vented
+N_RP = 5
 
 # observation parameters (``obs_par``)
 OP_SPEED_SCALE = 0  # m/s
@@ -82,14 +75,11 @@ def obs_size(n_axles: int, n_valves: int, privileged: bool) -> int:
 
 
 @njit(**INLINE_FLAGS)
-def demand_bar(env_par, env_state, e):
-    rise = env_par[e, EP_DEMAND_RISE]
-    t = env_state[e, ES_T] - env_par[e, EP_DEMAND_DELAY]
-    if rise > 0.0:
-        frac = min(1.0, max(0.0, t / rise))
-    else:
-        frac = 1.0 if t >= 0.0 else 0.0
-    return env_par[e, EP_P_MAX] * frac
+def damage_cost(sliding_energy_J, reward_par):
+    """Cost in metres of one axle's cumulative sliding energy: superlinear, so that a slide
+    concentrated on one wheel (a flat) costs more than the same energy spread over several."""
+    e_mj = sliding_energy_J * 1e-6
+    return reward_par[RP_DAMAGE_M_PER_MJ] * e_mj * (1.0 + e_mj / reward_par[RP_DAMAGE_REF_MJ])
 
 
 @njit(**INLINE_FLAGS)
@@ -121,7 +111,7 @@ def write_obs(
         obs[e, 2 * n_axles + k] = _clip((v_ref - wheel) * inv_ref)
         obs[e, 3 * n_axles + k] = axle_state[e, k, AS_P] / p_max
     base = 4 * n_axles
-    obs[e, base] = demand_bar(env_par, env_state, e) / p_max
+    obs[e, base] = demand_bar(env_par, e, env_state[e, ES_T]) / p_max
     obs[e, base + 1] = v_ref / v_s
     for j in range(n_valves):
         obs[e, base + 2 + j] = prev_action[e, j]
@@ -216,11 +206,11 @@ def _env_step_one(
     flags[e, F_CLIPPED] = clipped
     flags[e, F_NAN] = bad
     x0 = env_state[e, ES_X]
-    slide0 = 0.0
+    damage0 = 0.0
     air0 = 0.0
     for k in range(n_axles):
         prev_wheel[e, k] = axle_state[e, k, AS_OMEGA] * axle_par[e, k, AP_RADIUS]
-        slide0 += axle_acc[e, k, AA_SLIDE_E]
+        damage0 += damage_cost(axle_acc[e, k, AA_SLIDE_E], reward_par)
         air0 += axle_acc[e, k, AA_AIR_L]
     _step_env(
         e,
@@ -244,25 +234,21 @@ def _env_step_one(
     v_ref = max(fastest, v_ref - obs_par[OP_REF_DECEL_LIMIT] * ctrl_dt)
     v_ref = min(v_ref, wsp[e, W_VREF] + obs_par[OP_REF_RISE_LIMIT] * ctrl_dt)
     wsp[e, W_VREF] = v_ref
-    # --- reward terms ----------------------------------------------------------------------------
+    # --- reward terms (costs in metres of stopping distance) -------------------------------------
     v = env_state[e, ES_V]
-    tol = max(reward_par[RP_SLIDE_TOL_KMH] / 3.6, reward_par[RP_SLIDE_TOL_REL] * v)
-    excess = 0.0
     locked = 0.0
-    slide1 = 0.0
+    damage1 = 0.0
     air1 = 0.0
     for k in range(n_axles):
-        wheel = axle_state[e, k, AS_OMEGA] * axle_par[e, k, AP_RADIUS]
-        excess += max(0.0, v - wheel - tol)
-        if wheel < reward_par[RP_LOCK_SPEED] and v > 1.0:
+        if is_locked(axle_state[e, k, AS_OMEGA] * axle_par[e, k, AP_RADIUS], v):
             locked += 1.0
-        slide1 += axle_acc[e, k, AA_SLIDE_E]
+        damage1 += damage_cost(axle_acc[e, k, AA_SLIDE_E], reward_par)
         air1 += axle_acc[e, k, AA_AIR_L]
-    terms[e, R_DISTANCE] = -(env_state[e, ES_X] - x0) / reward_par[RP_DISTANCE_SCALE]
-    terms[e, R_SLIDE] = -reward_par[RP_W_SLIDE] * excess * ctrl_dt / reward_par[RP_SLIDE_SCALE]
-    terms[e, R_LOCK] = -reward_par[RP_W_LOCK] * locked * ctrl_dt
-    terms[e, R_ENERGY] = -reward_par[RP_W_ENERGY] * (slide1 - slide0) / reward_par[RP_ENERGY_SCALE]
-    terms[e, R_AIR] = -reward_par[RP_W_AIR] * (air1 - air0) / reward_par[RP_AIR_SCALE]
+    inv_scale = 1.0 / reward_par[RP_DISTANCE_SCALE]
+    terms[e, R_DISTANCE] = -(env_state[e, ES_X] - x0) * inv_scale
+    terms[e, R_DAMAGE] = -(damage1 - damage0) * inv_scale
+    terms[e, R_LOCK] = -reward_par[RP_LOCK_M_PER_S] * locked * ctrl_dt * inv_scale
+    terms[e, R_AIR] = -reward_par[RP_AIR_M_PER_100L] * (air1 - air0) * 0.01 * inv_scale
     flags[e, F_TERMINATED] = 1 if env_state[e, ES_STOPPED] > 0.0 else 0
     flags[e, F_TRUNCATED] = (
         1 if flags[e, F_TERMINATED] == 0 and env_state[e, ES_T] >= obs_par[OP_MAX_TIME] else 0

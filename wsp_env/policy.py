@@ -104,9 +104,9 @@ def make_policy(name_or_path: str, wsp_config: str | None = None) -> Any:
 
         return ClassicalWSP(load_wsp_config(wsp_config))
     if name_or_path == "oracle":
-        from wsp_env.baselines.oracle import OraclePolicy
+        from wsp_env.baselines.oracle import Oracle
 
-        return OraclePolicy()
+        return Oracle()
     path = Path(name_or_path)
     if path.suffix == ".zip" or path.exists():
         return SB3Policy(path)

@@ -9,10 +9,12 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
+
 from wsp_env.config import VehicleConfig
 from wsp_env.evaluation import CaseConfig, SuiteConfig, run_suite
 from wsp_env.simulator import VehicleArrays
-from wsp_env.trace_io import RunRecord
+from wsp_env.trace_io import CONTAMINANTS, RunRecord
 
 # nothing drawn but the rail's adhesion level and pattern: nominal load, pads and level track
 NOMINAL_SCENARIO = {"load_factor": [1.0, 1.0], "pad_factor": [1.0, 1.0],
@@ -56,12 +58,13 @@ def run_one(
 def trace_metadata(
     vehicle: VehicleConfig,
     conditions: dict[str, Any],
-    rail_name: str,
+    contaminant: str,
     sample_period_s: float,
     test_id: str,
 ) -> dict[str, Any]:
     """``*.meta.json`` of a simulated run (``conditions``: a run result's, for the initial
-    speed and the demand): nominal vehicle data only (TRACE_FORMAT.md)."""
+    speed and the demand; ``contaminant``: the trace format's name, ``RailConfig.
+    contaminant_name``): nominal vehicle data only (docs/trace_format.md)."""
     sim_arrays = VehicleArrays.from_config(vehicle)
     gain, p_th = vehicle.brake.linear_torque()
     veh: dict[str, Any] = {
@@ -71,9 +74,9 @@ def trace_metadata(
         "wheel_radius_m": vehicle.wheel_radius_m,
         "wheelset_inertia_kgm2": vehicle.wheelset_inertia_kgm2,
         "axle_static_load_kN": [round(x / 1e3, 3) for x in sim_arrays.load_ref_N],
-        # optional, beyond TRACE_FORMAT.md's list: the quasi-static load transfer per axle that
-        # the vehicle's documents (its config: pivot and frame heights) give, body and bogie
-        # pitch together; calibration reads it when present
+        # optional (docs/trace_format.md): the quasi-static load transfer per axle that the
+        # vehicle's documents (its config: pivot and frame heights) give, body and bogie pitch
+        # together; calibration reads it when present
         "axle_load_transfer_kN_per_mps2": [
             round(x / 1e3, 4) for x in sim_arrays.transfer_body + sim_arrays.transfer_rest
         ],
@@ -89,12 +92,19 @@ def trace_metadata(
             "c_N_per_mps2": vehicle.resistance.c_N_per_mps2,
         },
     }
+    if not np.allclose(sim_arrays.brake_gain, gain):
+        # optional (docs/trace_format.md): per-axle torque gains where they differ, e.g. motor
+        # axles whose ED brake is blended with the friction brake
+        veh["brake"]["axle_torque_gain_Nm_per_bar"] = [
+            round(float(g), 3) for g in sim_arrays.brake_gain
+        ]
     if len(vehicle.cars) == 1:
         car, (b0, b1) = vehicle.cars[0], vehicle.bogies
         veh["cog_height_m"] = car.cog_height_m
         veh["bogie_centre_distance_m"] = b1.position_m - b0.position_m
         veh["bogie_wheelbase_m"] = b0.wheelbase_m
-    contaminant = rail_name if rail_name in ("dry", "wet", "soap", "oil", "leaves") else "unknown"
+    if contaminant not in CONTAMINANTS:
+        raise ValueError(f"contaminant: {contaminant!r} is not one of {', '.join(CONTAMINANTS)}")
     return {
         "format": "wsp-trace/1",
         "test_id": test_id,

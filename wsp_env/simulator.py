@@ -18,9 +18,10 @@ import numpy as np
 from wsp_env.config import RailConfig, VehicleConfig
 from wsp_env.physics import layout as L
 from wsp_env.physics.adhesion import LAW_NAMES, REC_BASIS_NAMES, tustin_second_order
-from wsp_env.physics.brake import decay_factor
+from wsp_env.physics.brake import decay_factor, demand_pressures
 from wsp_env.physics.contact import kalker_longitudinal_stiffness_N
-from wsp_env.physics.integrator import reset_field, step_batch
+from wsp_env.physics.integrator import step_batch
+from wsp_env.physics.rail import friction_level, reset_field
 from wsp_env.physics.vehicle import Bogie, Car, TrainLayout
 
 KMH = 1.0 / 3.6
@@ -139,7 +140,7 @@ class VehicleArrays:
     rest_mass_kg: float
     stiffness_ref_N: np.ndarray  # axle Kalker stiffness at the nominal static load
     load_ref_N: np.ndarray
-    brake_gain: float
+    brake_gain: np.ndarray  # N m / bar per axle: friction brake, times the ED blend on motor axles
     p_threshold_bar: float
     valve_of_axle: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
 
@@ -160,6 +161,12 @@ class VehicleArrays:
             ct.poisson,
         )
         gain, p_th = vehicle.brake.linear_torque()
+        # the ED brake follows the friction brake (blending): it scales the axle's torque gain
+        # so that full demand gives the friction torque plus F_ed r
+        full_friction = gain * (vehicle.brake.p_max_bar - p_th)
+        ed_N = np.repeat([b.ed_brake_force_kN * 1e3 for b in vehicle.bogies],
+                         [b.n_axles for b in vehicle.bogies])  # fmt: skip
+        gains = gain * (1.0 + ed_N * vehicle.wheel_radius_m / full_friction)
         if vehicle.brake.valve_group == "bogie":
             valve = np.repeat(np.arange(len(vehicle.bogies)), [b.n_axles for b in vehicle.bogies])
         else:
@@ -175,7 +182,7 @@ class VehicleArrays:
             rest_mass_kg=_layout(vehicle, 0.0, 1.0).mass_kg,
             stiffness_ref_N=2.0 * np.asarray(wheel, dtype=float),
             load_ref_N=nominal,
-            brake_gain=gain,
+            brake_gain=gains,
             p_threshold_bar=p_th,
             valve_of_axle=valve.astype(np.int64),
         )
@@ -185,7 +192,10 @@ class TrainSim:
     """``n_envs`` braking runs of one vehicle, advanced together.
 
     Substep ``dt_s`` (default 1 ms: see README "Integrator" for the convergence figures) and
-    control period ``control_period_s`` (20 ms, the BCU cycle).
+    control period ``control_period_s`` (20 ms, the BCU cycle). A wheel whose sliding speed
+    exceeds ``max(slide_threshold_kmh, slide_threshold_rel V)`` counts as sliding in the metrics
+    (time sliding, longest slide): a slide deeper than a WSP's working slip, which a WSP ends
+    within a second or two; held for long, it overheats and wears the tread.
     """
 
     def __init__(
@@ -196,6 +206,8 @@ class TrainSim:
         control_period_s: float = 0.02,
         cell_dx_m: float = 0.25,
         v_eps_mps: float = 0.1,
+        slide_threshold_kmh: float = 3.0,
+        slide_threshold_rel: float = 0.2,
     ) -> None:
         n_sub = round(control_period_s / dt_s)
         if n_sub < 1 or abs(n_sub * dt_s - control_period_s) > 1e-9:
@@ -214,6 +226,8 @@ class TrainSim:
         self.control_period_s = control_period_s
         self.cell_dx_m = cell_dx_m
         self.v_eps_mps = v_eps_mps
+        self.slide_threshold_kmh = slide_threshold_kmh
+        self.slide_threshold_rel = slide_threshold_rel
         train_length = float(self.arrays.offsets_m[-1])
         n_cells = math.ceil(train_length / cell_dx_m) + 4
         self.env_par = np.zeros((n_envs, L.N_EP))
@@ -277,6 +291,9 @@ class TrainSim:
             self.sections[env, : len(setup.sections)] = np.asarray(setup.sections, dtype=float)
         ep[L.EP_V_EPS] = self.v_eps_mps
         ep[L.EP_EXTRA_BRAKE_N] = setup.extra_brake_force_N
+        ep[L.EP_SLIDE_THRESH] = self.slide_threshold_kmh * KMH
+        ep[L.EP_SLIDE_REL] = self.slide_threshold_rel
+        ep[L.EP_STIFF_FACTOR] = rail.creep_stiffness_factor
 
         ap = self.axle_par[env]
         static = va.static_body_N * f + va.static_rest_N
@@ -321,9 +338,10 @@ class TrainSim:
             # the friction level each axle stands on (read by observers before the first step)
             cells = np.floor(-self.axle_par[e, :, L.AP_OFFSET] / self.cell_dx_m).astype(np.int64)
             cont = self.field[e, cells % self.field.shape[1]]
-            ep = self.env_par[e]
-            level = ep[L.EP_MU_CLEAN] - (ep[L.EP_MU_CLEAN] - ep[L.EP_MU_CONT]) * cont
-            self.axle_state[e, :, L.AS_MU_LEVEL] = level * self.axle_par[e, :, L.AP_MU_FACTOR]
+            for k in range(self.n_axles):
+                self.axle_state[e, k, L.AS_MU_LEVEL] = friction_level(
+                    self.env_par, e, cont[k], self.axle_par[e, k, L.AP_MU_FACTOR]
+                )
             self.axle_state[e, :, L.AS_CONT] = cont
             self.initial_energy_J[e] = self.kinetic_energy_J()[e]
 
@@ -378,10 +396,8 @@ class TrainSim:
         return self.axle_state[:, :, L.AS_P]
 
     def demand_bar(self) -> np.ndarray:
-        ep, t = self.env_par, self.time_s
-        rise = np.maximum(ep[:, L.EP_DEMAND_RISE], 1e-12)
-        frac = np.clip((t - ep[:, L.EP_DEMAND_DELAY]) / rise, 0.0, 1.0)
-        return ep[:, L.EP_P_MAX] * frac
+        """Demand pressure (bar) of every run now (``brake.demand_bar``)."""
+        return demand_pressures(self.env_par, self.time_s)
 
     def kinetic_energy_J(self) -> np.ndarray:
         v = self.speed_mps

@@ -1,8 +1,8 @@
 """Writing (and strict basic reading) of ``wsp-trace/1`` braking traces.
 
 A trace is ``STEM.csv`` (samples, header line first) plus ``STEM.meta.json`` (test and nominal
-vehicle data); the format is specified in ``TRACE_FORMAT.md``. This module turns a simulated run
-(:class:`RunRecord`, recorded at the control period) into logger-like samples
+vehicle data); the format is specified in ``docs/trace_format.md``. This module turns a
+simulated run (:class:`RunRecord`, recorded at the control period) into logger-like samples
 (:func:`sample_run`, with a :class:`SensorModel` for period, jitter, noise and quantisation) and
 writes them atomically (:func:`write_trace`). :func:`read_trace_basic` is a deliberately small,
 strict reader for round trips; it does not know vendor aliases and does not fill gaps.
@@ -49,7 +49,7 @@ class RunRecord:
     """A simulated run recorded at the control period (uniform time grid).
 
     Speeds in km/h (axle speed is the peripheral speed ``omega * r_nominal``), pressures in bar
-    (gauge), ``a_train_mps2`` positive when slowing; see ``TRACE_FORMAT.md`` for the channels.
+    (gauge), ``a_train_mps2`` positive when slowing; see ``docs/trace_format.md`` for the channels.
     """
 
     time_s: np.ndarray  # (T,)
@@ -101,7 +101,7 @@ class RunRecord:
 
 @dataclass
 class SensorModel:
-    """How a data logger samples a run (``TRACE_FORMAT.md``: logger 0.1 s, BCU cycle 0.02 s).
+    """How a data logger samples a run (``docs/trace_format.md``: logger 0.1 s, BCU cycle 0.02 s).
 
     ``jitter_s`` is the std of a per-sample timestamp offset (truncated at 0.45 periods so the
     stamps stay strictly increasing; at most a quarter period). Noise values are Gaussian
@@ -414,7 +414,7 @@ def replace_dir_atomically(target: str | Path, build: Callable[[Path], None]) ->
 
 
 def write_trace(stem: str | Path, columns: dict[str, np.ndarray], meta: dict) -> tuple[Path, Path]:
-    """Write ``STEM.csv`` and ``STEM.meta.json`` (``TRACE_FORMAT.md``); return their paths.
+    """Write ``STEM.csv`` and ``STEM.meta.json`` (``docs/trace_format.md``); return their paths.
 
     ``meta`` gets ``format: "wsp-trace/1"`` if missing (the caller's dict is not modified).
     Required metadata (``sample_period_s``, ``vehicle.n_axles``, ``vehicle.wheel_radius_m``,
@@ -484,7 +484,7 @@ def write_trace(stem: str | Path, columns: dict[str, np.ndarray], meta: dict) ->
 
 
 def read_trace_basic(csv_path: str | Path) -> tuple[dict[str, np.ndarray], dict]:
-    """Read ``STEM.csv`` and ``STEM.meta.json`` strictly (``TRACE_FORMAT.md``), for round trips.
+    """Read ``STEM.csv`` and ``STEM.meta.json`` strictly (``docs/trace_format.md``), round trips.
 
     Every column comes back as ``float64`` (empty cells are NaN; 0/1 flags are 0.0/1.0), in file
     order. No vendor aliases, no gap filling: a malformed file raises ``ValueError`` naming the

@@ -50,11 +50,7 @@ class Channel:
 
 def brake_force_N(trace: Trace) -> np.ndarray:
     """(T, n_axles) brake force at the rail, ``gain (p - p_th)^+ / r``, from the metadata."""
-    veh = trace.vehicle
-    brake = veh.get("brake", {})
-    gain = float(brake.get("torque_gain_Nm_per_bar", 0.0))
-    p_th = float(brake.get("p_threshold_bar", 0.0))
-    return gain * np.maximum(0.0, trace.p_cyl_bar - p_th) / float(veh["wheel_radius_m"])
+    return trace.brake_torque_Nm() / float(trace.vehicle["wheel_radius_m"])
 
 
 def resistance_N(trace: Trace, v_mps: np.ndarray) -> np.ndarray:

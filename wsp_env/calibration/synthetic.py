@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from wsp_env.config import RailConfig, load_vehicle
+from wsp_env.config import RailConfig, VehicleConfig, load_vehicle
 from wsp_env.policy import make_policy
 from wsp_env.runner import run_one, trace_metadata
 from wsp_env.trace_io import SensorModel, sample_run, write_trace
@@ -24,7 +24,7 @@ def simulate_trace(
     stem: str | Path,
     rail: RailConfig,
     speed_kmh: float,
-    vehicle: str = "uic_z1",
+    vehicle: str | VehicleConfig = "uic_z1",
     policy: str = "classical",
     wsp_config: str | None = None,
     sensors: SensorModel | None = None,
@@ -53,7 +53,7 @@ def simulate_trace(
     pressure. ``speed_scale_error`` / ``speed_lag_s``: the ground-speed sensor's scale error and
     lag.
     """
-    nominal = load_vehicle(vehicle)  # what the metadata declares
+    nominal = vehicle if isinstance(vehicle, VehicleConfig) else load_vehicle(vehicle)
     veh = nominal
     # a coasting lead-in before the brake acts, as test logs have (coasting-creep channel)
     res = veh.resistance
@@ -105,7 +105,7 @@ def simulate_trace(
             columns[f"v_axle_{i}_kmh"] = columns[f"v_axle_{i}_kmh"] / (1.0 + err)
     meta = trace_metadata(
         nominal, result["conditions"], contaminant, (sensors or SensorModel()).sample_period_s,
-        f"synthetic {vehicle} {speed_kmh:g} km/h seed {seed}",
+        f"synthetic {nominal.id} {speed_kmh:g} km/h seed {seed}",
     )  # fmt: skip
     csv_path, meta_path = write_trace(stem, columns, meta)
     return csv_path, meta_path, result

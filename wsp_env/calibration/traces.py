@@ -1,4 +1,4 @@
-"""Reading measured braking traces (``TRACE_FORMAT.md``, ``wsp-trace/1``) for calibration.
+"""Reading measured braking traces (``docs/trace_format.md``, ``wsp-trace/1``) for calibration.
 
 ``read_trace(csv_path)`` reads ``NAME.csv`` and ``NAME.meta.json``, accepts the BCU's vendor
 channel names (converting units), validates, fills short gaps and returns a :class:`Trace`.
@@ -25,11 +25,11 @@ from typing import Any
 
 import numpy as np
 
-FORMAT = "wsp-trace/1"
+from wsp_env.trace_io import CONTAMINANTS, FORMAT
+
 MAX_GAP = 3  # samples: longer runs of missing values in a required column are an error
 MAX_SPEED_KMH = 500.0
 MAX_PRESSURE_BAR = 12.0
-CONTAMINANTS = ("dry", "wet", "soap", "oil", "leaves", "unknown")
 
 
 class TraceError(ValueError):
@@ -38,7 +38,7 @@ class TraceError(ValueError):
 
 @dataclass
 class Trace:
-    """A validated trace in the canonical units of ``TRACE_FORMAT.md``."""
+    """A validated trace in the canonical units of ``docs/trace_format.md``."""
 
     path: Path
     meta: dict[str, Any]
@@ -58,8 +58,23 @@ class Trace:
     def vehicle(self) -> dict[str, Any]:
         return self.meta["vehicle"]
 
+    def axle_torque_gains(self) -> np.ndarray:
+        """Nominal brake torque gain (N m / bar) per axle: ``brake.axle_torque_gain_Nm_per_bar``
+        where the metadata lists them (motor axles with a blended ED brake), else
+        ``brake.torque_gain_Nm_per_bar`` for every axle."""
+        brake = self.vehicle.get("brake", {})
+        gains = brake.get("axle_torque_gain_Nm_per_bar")
+        if gains is None:
+            gains = [float(brake.get("torque_gain_Nm_per_bar", 0.0))] * self.n_axles
+        return np.asarray(gains, dtype=float)
 
-# vendor name -> (canonical name, factor) ; see TRACE_FORMAT.md "Vendor channel names"
+    def brake_torque_Nm(self) -> np.ndarray:
+        """(T, n_axles) nominal brake torque ``gain_i (p_i - p_th)^+`` from the metadata."""
+        p_th = float(self.vehicle.get("brake", {}).get("p_threshold_bar", 0.0))
+        return self.axle_torque_gains()[None, :] * np.maximum(0.0, self.p_cyl_bar - p_th)
+
+
+# vendor name -> (canonical name, factor) ; see docs/trace_format.md "Vendor channel names"
 _VENDOR_FIXED = {
     "time": ("time_s", 1.0),
     "vtrain": ("v_train_kmh", 3.6),
@@ -115,6 +130,17 @@ def _read_meta(csv_path: Path) -> tuple[Path, dict[str, Any]]:
             or not all(isinstance(x, int | float) and math.isfinite(x) for x in per_axle)
         ):
             raise _fail(meta_path, f"vehicle.{key}: must list one number per axle")
+    brake = veh.get("brake", {})
+    gains = brake.get("axle_torque_gain_Nm_per_bar") if isinstance(brake, dict) else None
+    if gains is not None and (
+        not isinstance(gains, list)
+        or len(gains) != veh["n_axles"]
+        or not all(isinstance(x, int | float) and math.isfinite(x) and x > 0 for x in gains)
+    ):
+        raise _fail(
+            meta_path, "vehicle.brake.axle_torque_gain_Nm_per_bar: must list one positive "
+            "number per axle"
+        )  # fmt: skip
     return meta_path, meta
 
 

@@ -109,14 +109,6 @@ def polach(axi, w, mu0, k, kA, kS, A, B):
 
 
 @njit(**JIT)
-def polach_shape(axi, mu_level, k, kA, kS):
-    """Rising part of the Polach law at a fixed friction level (no fall-off): (s, ds/d|xi|)."""
-    c = 0.25 * math.pi * k / mu_level
-    h, dh = _polach_bracket(c * axi, kA, kS)
-    return h, dh * c
-
-
-@njit(**JIT)
 def polach_simple(axi, w, mu0, K, k_rozv_per_kmh):
     """Seed 000 Eq. 9; returns (m, dm/d|xi|, dm/dw). DV read in km/h (see module doc)."""
     D = 1.0 + k_rozv_per_kmh * KMH_PER_MPS * w
@@ -125,14 +117,6 @@ def polach_simple(axi, w, mu0, K, k_rozv_per_kmh):
     m = mu0 * (1.0 - E) * inv_D
     dm_dD = (K * axi * E - m) * inv_D
     return m, K * E, dm_dD * k_rozv_per_kmh * KMH_PER_MPS
-
-
-@njit(**JIT)
-def polach_simple_shape(axi, mu_level, K):
-    """Seed 000 Eq. 9 without fall-off (K_rozv = 0), normalised: (s, ds/d|xi|)."""
-    g = K / mu_level
-    E = math.exp(-g * axi)
-    return 1.0 - E, g * E
 
 
 @njit(**JIT)
@@ -145,51 +129,84 @@ def _saturation(alpha):
 
 
 @njit(**JIT)
-def seed002(axi, mu_c, k, inv_k, k_red, lam):
-    """Seed 002 Eqs. 4, 7, 8 (no hysteresis); returns (m, dm/d|xi|, 0)."""
+def sliding_falloff(w, A, B):
+    """Polach 2005 fall-off of friction with sliding speed: ``g = A + (1 - A) exp(-B w)``, dg/dw.
+
+    ``A = 1`` (or ``B = 0``) switches it off. Applied to the seed 002 law (which has none of its
+    own): with A 0.4 (Polach 2005) and B 0.18 s/m it lies inside seed 000 Table 4's measured
+    soap fall-off ``1 / (1 + K_rozv DV)``, K_rozv 0.0286-0.0325 per km/h, over 0-20 km/h of
+    sliding (DV in km/h), and tends to A at a locked wheel's sliding speeds.
+    """
+    if A >= 1.0 or B <= 0.0:
+        return 1.0, 0.0
+    e = math.exp(-B * w)
+    return A + (1.0 - A) * e, -(1.0 - A) * B * e
+
+
+@njit(**JIT)
+def _seed002_degraded(axi, mu_c, k, inv_k, k_red, lam):
+    """Seed 002 Eqs. 4, 7, 8 (no hysteresis), before the fall-off: (m, dm/d|xi|)."""
     xi_lim = 3.0 * mu_c * inv_k  # alpha = k xi / mu_c reaches 3: the peak mu_c
     if axi <= xi_lim:
         c = k / mu_c  # alpha per unit creepage
         f, df = _saturation(c * axi)
-        return mu_c * f, mu_c * df * c, 0.0
+        return mu_c * f, mu_c * df * c
     x = lam * (axi - xi_lim)
     if x > 40.0:  # e^-40 ~ 4e-18: fully on the kinematic level
-        return mu_c * k_red, 0.0, 0.0
+        return mu_c * k_red, 0.0
     e = math.exp(-x)
-    return mu_c * (k_red + (1.0 - k_red) * e), -mu_c * lam * (1.0 - k_red) * e, 0.0
+    return mu_c * (k_red + (1.0 - k_red) * e), -mu_c * lam * (1.0 - k_red) * e
 
 
 @njit(**JIT)
-def seed002_shape(axi, mu_level, k, inv_k):
-    """Seed 002 Eq. 4 saturation alone (K_a = 1), normalised: (s, ds/d|xi|)."""
+def _seed002_clean(axi, mu_level, k, inv_k):
+    """The recovered contact before the fall-off: Eq. 4's saturation alone (m, dm/d|xi|)."""
     if axi >= 3.0 * mu_level * inv_k:
-        return 1.0, 0.0
+        return mu_level, 0.0
     c = k / mu_level
     f, df = _saturation(c * axi)
-    return f, df * c
+    return mu_level * f, mu_level * df * c
+
+
+@njit(**JIT)
+def seed002(axi, w, mu_c, k, inv_k, k_red, lam, A, B):
+    """Seed 002 Eqs. 4, 7, 8 (no hysteresis) times ``sliding_falloff``; (m, dm/d|xi|, dm/dw)."""
+    g, g_w = sliding_falloff(w, A, B)
+    m0, m0_xi = _seed002_degraded(axi, mu_c, k, inv_k, k_red, lam)
+    return m0 * g, m0_xi * g, m0 * g_w
+
+
+@njit(**JIT)
+def seed002_recovered(axi, w, mu_level, k, inv_k, A, B):
+    """The recovered (cleaned) contact of the seed 002 law: Eq. 4's saturation at ``mu_level``
+    without Eq. 7's kinetic drop (the contaminant's), times ``sliding_falloff``: (m, m_xi, m_w)."""
+    g, g_w = sliding_falloff(w, A, B)
+    r0, r0_xi = _seed002_clean(axi, mu_level, k, inv_k)
+    return r0 * g, r0_xi * g, r0 * g_w
 
 
 @njit(**JIT)
 def creep_law(law, axi, w, mu_level, k, inv_k, p0, p1, p2, p3):
     """Dispatch to the degraded law ``mu*``. ``k`` = Ca / N, ``inv_k`` = N / Ca. Parameters:
 
-    polach: kA, kS, A, B[s/m];  polach_simple: K, K_rozv[1/(km/h)];  seed002: K_red, lambda.
+    polach: kA, kS, A, B[s/m];  polach_simple: K, K_rozv[1/(km/h)];
+    seed002: K_red, lambda, A, B[s/m] (the last two: ``sliding_falloff``).
     """
     if law == LAW_SEED002:
-        return seed002(axi, mu_level, k, inv_k, p0, p1)
+        return seed002(axi, w, mu_level, k, inv_k, p0, p1, p2, p3)
     if law == LAW_POLACH:
         return polach(axi, w, mu_level, k, p0, p1, p2, p3)
     return polach_simple(axi, w, mu_level, p0, p1)
 
 
 @njit(**JIT)
-def recovered_shape(law, axi, mu_level, k, inv_k, p0, p1):
-    """The recovered (clean) curve's normalised rising shape ``s(|xi|)`` and its slope."""
+def recovered_curve(law, axi, w, mu_rec, k, inv_k, p0, p1, p2, p3):
+    """The recovered curve at level ``mu_rec``: the law's rising shape and its sliding-speed
+    fall-off (a cleaned rail still loses friction with sliding speed), without the seed 002
+    law's kinetic drop K_red. Returns (m, dm/d|xi|, dm/dw)."""
     if law == LAW_SEED002:
-        return seed002_shape(axi, mu_level, k, inv_k)
-    if law == LAW_POLACH:
-        return polach_shape(axi, mu_level, k, p0, p1)
-    return polach_simple_shape(axi, mu_level, p0)
+        return seed002_recovered(axi, w, mu_rec, k, inv_k, p2, p3)
+    return creep_law(law, axi, w, mu_rec, k, inv_k, p0, p1, p2, p3)
 
 
 @njit(**JIT)
@@ -198,12 +215,20 @@ def adhesion(law, axi, w, mu_level, mu_rec, k_w, k, inv_k, p0, p1, p2, p3):
 
     Returns (m, dm/d|xi|, dm/dw) — see the module docstring for the blend.
     """
+    if law == LAW_SEED002:  # both curves share the fall-off: blend first, one exp
+        g, g_w = sliding_falloff(w, p2, p3)
+        b, b_xi = _seed002_degraded(axi, mu_level, k, inv_k, p0, p1)
+        if k_w > 0.0:
+            r0, r0_xi = _seed002_clean(axi, mu_rec, k, inv_k)
+            keep = 1.0 - k_w
+            b, b_xi = keep * b + k_w * r0, keep * b_xi + k_w * r0_xi
+        return b * g, b_xi * g, b * g_w
     m, m_xi, m_w = creep_law(law, axi, w, mu_level, k, inv_k, p0, p1, p2, p3)
     if k_w <= 0.0:
         return m, m_xi, m_w
-    s, s_xi = recovered_shape(law, axi, mu_rec, k, inv_k, p0, p1)
+    r, r_xi, r_w = recovered_curve(law, axi, w, mu_rec, k, inv_k, p0, p1, p2, p3)
     keep = 1.0 - k_w
-    return keep * m + k_w * mu_rec * s, keep * m_xi + k_w * mu_rec * s_xi, keep * m_w
+    return keep * m + k_w * r, keep * m_xi + k_w * r_xi, keep * m_w + k_w * r_w
 
 
 PEAK_GRID = 64

@@ -11,14 +11,34 @@ The disc-brake chain of seed 000:
   factor 2 for the two pad faces, so ``F_B`` must be the sum over both pads).
 
 The chain is affine in ``p``, so it reduces to ``T = gain (p - p_threshold)^+`` — the form the
-kernel uses and the linear form of ``TRACE_FORMAT.md`` (seed 000 Eq. 5,
+kernel uses and the linear form of ``docs/trace_format.md`` (seed 000 Eq. 5,
 ``F_B[kN] = (p - 0.174) / 0.1565``, is that reduction for the ETR 1000 caliper).
+
+The compiled helpers at the end (demand ramp, pad factor, brake torque) are the one definition
+of those formulas: the kernel, the reference distance, the oracle and the read-outs call them.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from wsp_env.physics.layout import (
+    AP_BRAKE_GAIN,
+    AP_P_THRESH,
+    EP_DEMAND_DELAY,
+    EP_DEMAND_RISE,
+    EP_P_MAX,
+    EP_PAD_SCALE,
+    EP_PAD_SLOPE,
+    EP_PAD_VREF,
+)
+
+INLINE = {"cache": True, "error_model": "numpy", "inline": "always"}
+PAD_FACTOR_MIN = 0.2  # the speed-dependent pad friction never falls below this share
 
 
 @dataclass(frozen=True)
@@ -86,3 +106,58 @@ class DiscBrakeChain:
 def decay_factor(tau_s: float, dt_s: float) -> float:
     """``exp(-dt / tau)``: exact one-step solution of a first-order lag (0 for tau = 0)."""
     return 0.0 if tau_s <= 0 else math.exp(-dt_s / tau_s)
+
+
+# ---- compiled helpers: the one definition of each formula -----------------------------------
+
+
+@njit(**INLINE)
+def demand_fraction(env_par, e, t):
+    """Share of ``p_max`` the brake demands ``t`` s after the command: a dead time, then a linear
+    rise (``rise = 0``: a step at the end of the dead time)."""
+    since = t - env_par[e, EP_DEMAND_DELAY]
+    if since < 0.0:
+        return 0.0
+    rise = env_par[e, EP_DEMAND_RISE]
+    if rise <= 0.0:
+        return 1.0
+    return min(1.0, since / rise)
+
+
+@njit(**INLINE)
+def demand_bar(env_par, e, t):
+    """Demand pressure (bar) at time ``t`` since the brake command."""
+    return env_par[e, EP_P_MAX] * demand_fraction(env_par, e, t)
+
+
+@njit(cache=True, error_model="numpy")
+def demand_bars(env_par, times, out):
+    """``demand_bar`` for every environment (``times[e]`` s since its brake command)."""
+    for e in range(env_par.shape[0]):
+        out[e] = demand_bar(env_par, e, times[e])
+    return out
+
+
+@njit(**INLINE)
+def pad_factor(env_par, e, v):
+    """Pad friction relative to nominal at train speed ``v`` m/s: the run's scale times a linear
+    speed dependence about ``EP_PAD_VREF``, never below ``PAD_FACTOR_MIN``."""
+    slope = env_par[e, EP_PAD_SLOPE] * (v - env_par[e, EP_PAD_VREF])
+    return env_par[e, EP_PAD_SCALE] * max(PAD_FACTOR_MIN, 1.0 + slope)
+
+
+@njit(**INLINE)
+def brake_torque(axle_par, e, k, p_bar, pad):
+    """Brake torque (N m) of axle ``k`` at pressure ``p_bar``: ``gain (p - p_th)^+ pad``."""
+    return axle_par[e, k, AP_BRAKE_GAIN] * max(0.0, p_bar - axle_par[e, k, AP_P_THRESH]) * pad
+
+
+@njit(**INLINE)
+def pressure_for_torque(axle_par, e, k, torque, pad):
+    """The cylinder pressure (bar) at which ``brake_torque`` gives ``torque`` (its inverse)."""
+    return torque / (axle_par[e, k, AP_BRAKE_GAIN] * pad) + axle_par[e, k, AP_P_THRESH]
+
+
+def demand_pressures(env_par: np.ndarray, times: np.ndarray) -> np.ndarray:
+    """Demand pressure (bar) of every environment at its time ``times[e]``."""
+    return demand_bars(env_par, np.ascontiguousarray(times, dtype=float), np.empty(len(times)))

@@ -2,11 +2,12 @@
 
 Equations (per environment ``e``, axle ``k``, substep ``dt``):
 
-* demand  ``p_d(t) = p_max clip((t - t_delay) / t_rise, 0, 1)``;
+* demand  ``p_d(t) = p_max clip((t - t_delay) / t_rise, 0, 1)`` (``brake.demand_fraction``);
 * valve   target ``u p_d`` (``u`` in [0, 1]) or *hold*; the command of the previous control period
   acts for the valve dead time; the cylinder follows a first-order law integrated exactly
   (``p <- target + (p - target) exp(-dt/tau)``) with a rate limit, faster when venting;
-* brake   ``T_b = gain (p - p_th)^+ * pad(V)`` (seed 000 Eqs. 3–6, linear form);
+* brake   ``T_b = gain (p - p_th)^+ * pad(V)`` (seed 000 Eqs. 3–6, linear form;
+  ``brake.brake_torque``, ``brake.pad_factor``);
 * wheel   ``J domega/dt = F r - T_b`` with ``F = mu N`` from ``adhesion.adhesion``;
   integrated **linearly-implicitly**: ``domega = dt (F r - T_b) / (J + dt r D)`` with
   ``D = r N max(0, dmu/dxi / V + dmu/dw) = -dF/domega`` (its stabilising part); the rising creep
@@ -19,9 +20,9 @@ Equations (per environment ``e``, axle ``k``, substep ``dt``):
   (kinetic energy = brake + sliding + resistance work) holds to round-off;
 * load    ``N_k = N_static,k + k_transfer,k * decel`` (quasi-static load transfer);
   Kalker stiffness scales as ``N^(2/3)`` (Hertz);
-* rail    each axle reads the contamination of the rail cell under it and removes
-  ``1 - exp(-(E_slide / E_clean + pass_removal * ds) / dx)`` of it: trailing axles see the rail
-  the leading ones cleaned.
+* rail    each axle reads the contamination ``c`` of the rail cell under it (``rail.py``) and
+  removes ``dc = -c (E_slide / E_clean + pass_removal ds) / dx`` (implicit Euler): trailing
+  axles see the rail the leading ones cleaned.
 
 ``step_batch`` advances all environments by ``n_sub`` substeps; environments at standstill are
 left untouched. Serial and ``prange`` (two-core) variants share ``_step_env``.
@@ -39,29 +40,34 @@ from wsp_env.physics.adhesion import (
     REC_BASIS_WHEEL_METRE,
     adhesion,
 )
+from wsp_env.physics.brake import brake_torque, demand_fraction, pad_factor
 from wsp_env.physics.layout import (
     AA_ADH_INT,
     AA_AIR_L,
+    AA_AVAIL_INT,
     AA_BRAKE_E,
     AA_BRAKE_T,
     AA_LEVEL_INT,
     AA_LOCK_CUR,
     AA_LOCK_MAX,
+    AA_MAX_SLIDE,
+    AA_SLIDE_CUR,
     AA_SLIDE_E,
     AA_SLIDE_INT,
+    AA_SLIDE_MAX,
     AA_SLIDE_SQ_INT,
+    AA_SLIDE_T,
+    AA_VALVE_CYCLES,
     AA_VENT_CUR,
     AA_VENT_MAX,
-    AP_BRAKE_GAIN,
+    AA_VENT_T,
     AP_CYL_VOLUME_L,
     AP_INERTIA,
     AP_K_TRANSFER,
     AP_MU_FACTOR,
     AP_N_STATIC,
     AP_OFFSET,
-    AP_P_THRESH,
     AP_RADIUS,
-    AP_STIFF,
     AS_CELL,
     AS_CMD,
     AS_CONT,
@@ -82,41 +88,31 @@ from wsp_env.physics.layout import (
     EA_EXTRA_E,
     EA_GRADE_E,
     EA_RESIST_E,
-    EP_C_BACKGROUND,
     EP_CELL_DX,
     EP_DAVIS_A,
     EP_DAVIS_B,
     EP_DAVIS_C,
-    EP_DEMAND_DELAY,
-    EP_DEMAND_RISE,
     EP_E_CLEAN,
     EP_EXTRA_BRAKE_N,
     EP_FILL_DECAY,
     EP_FILL_RATE,
     EP_GRADE_ACC,
-    EP_INJ_LEVEL,
-    EP_INJ_UNTIL,
     EP_LAW,
     EP_LP0,
     EP_LP1,
     EP_LP2,
     EP_LP3,
     EP_MASS,
-    EP_MU_CLEAN,
-    EP_MU_CONT,
-    EP_N_SECTIONS,
     EP_P_MAX,
-    EP_PAD_SCALE,
-    EP_PAD_SLOPE,
-    EP_PAD_VREF,
     EP_PASS_REMOVAL,
     EP_REC_BASIS,
-    EP_REC_GAIN,
     EP_RF_A1,
     EP_RF_A2,
     EP_RF_B0,
     EP_RF_B1,
     EP_RF_B2,
+    EP_SLIDE_REL,
+    EP_SLIDE_THRESH,
     EP_V_EPS,
     EP_VALVE_DEAD,
     EP_VENT_DECAY,
@@ -131,6 +127,15 @@ from wsp_env.physics.layout import (
     ES_V,
     ES_X,
 )
+from wsp_env.physics.rail import (
+    advance_field,
+    available_level,
+    creep_stiffness,
+    effective_removal,
+    friction_level,
+    recovered_level,
+    recovers,
+)
 
 P_ATM_BAR = 1.01325
 INV_P_ATM = 1.0 / P_ATM_BAR
@@ -143,42 +148,21 @@ KERNEL_FLAGS = {"cache": True, "error_model": "numpy"}
 INLINE_FLAGS = {"cache": True, "error_model": "numpy", "inline": "always"}
 
 
-@njit(**KERNEL_FLAGS)
-def contamination_at(env_par, sections, e, x):
-    """Initial contamination level of the rail at position ``x`` (sections override background)."""
-    c = env_par[e, EP_C_BACKGROUND]
-    for s in range(int(env_par[e, EP_N_SECTIONS])):
-        if sections[e, s, 0] <= x < sections[e, s, 1]:
-            c = sections[e, s, 2]
-    return c
+@njit(**INLINE_FLAGS)
+def is_locked(wheel_speed, train_speed):
+    """A wheel turning slower than ``LOCK_WHEEL_SPEED`` while the train still moves is locked
+    (the one definition: metrics, reward and policies use it)."""
+    return wheel_speed < LOCK_WHEEL_SPEED and train_speed > LOCK_TRAIN_SPEED
 
 
-@njit(**KERNEL_FLAGS)
-def _lay_cell(env_par, sections, env_state, field, e, cell):
-    dx = env_par[e, EP_CELL_DX]
-    c = contamination_at(env_par, sections, e, (cell + 0.5) * dx)
-    if env_state[e, ES_T] < env_par[e, EP_INJ_UNTIL]:
-        c = max(c, env_par[e, EP_INJ_LEVEL])
-    field[e, cell % field.shape[1]] = c
-
-
-@njit(**KERNEL_FLAGS)
-def reset_field(env_par, sections, env_state, field, e):
-    """Lay the rail under a train whose leading axle stands at ``env_state[e, ES_X]``."""
-    head = math.floor(env_state[e, ES_X] / env_par[e, EP_CELL_DX])
-    for cell in range(head - field.shape[1] + 1, head + 1):
-        _lay_cell(env_par, sections, env_state, field, e, cell)
-    env_state[e, ES_HEAD] = head
-
-
-@njit(**KERNEL_FLAGS)
-def _advance_field(env_par, sections, env_state, field, e):
-    head = int(env_state[e, ES_HEAD])
-    front = math.floor(env_state[e, ES_X] / env_par[e, EP_CELL_DX])
-    while head < front:
-        head += 1
-        _lay_cell(env_par, sections, env_state, field, e, head)
-    env_state[e, ES_HEAD] = head
+@njit(**INLINE_FLAGS)
+def _spell(axle_acc, e, k, current, longest, on, span):
+    """Extend the current spell of a condition by ``span`` (or end it) and keep the longest."""
+    if on:
+        axle_acc[e, k, current] += span
+        axle_acc[e, k, longest] = max(axle_acc[e, k, longest], axle_acc[e, k, current])
+    else:
+        axle_acc[e, k, current] = 0.0
 
 
 @njit(**KERNEL_FLAGS)
@@ -202,24 +186,19 @@ def _step_env(
     n_cells = field.shape[1]
     mass = env_par[e, EP_MASS]
     p_max = env_par[e, EP_P_MAX]
-    t_delay = env_par[e, EP_DEMAND_DELAY]
-    t_rise = env_par[e, EP_DEMAND_RISE]
     fill_decay = env_par[e, EP_FILL_DECAY]
     fill_step = env_par[e, EP_FILL_RATE] * dt
     vent_decay = env_par[e, EP_VENT_DECAY]
     vent_step = env_par[e, EP_VENT_RATE] * dt
     dead = env_par[e, EP_VALVE_DEAD]
     law = int(env_par[e, EP_LAW])
-    mu_clean = env_par[e, EP_MU_CLEAN]
-    mu_cont = env_par[e, EP_MU_CONT]
     lp0 = env_par[e, EP_LP0]
     lp1 = env_par[e, EP_LP1]
     lp2 = env_par[e, EP_LP2]
     lp3 = env_par[e, EP_LP3]
-    rec_gain = env_par[e, EP_REC_GAIN]
     w_lim = env_par[e, EP_W_LIM]
     w_span = env_par[e, EP_W_MAX] - w_lim
-    recovery_on = w_span > 0.0 and w_lim < 1e300
+    recovery_on = recovers(env_par, e)
     inv_w_span = 1.0 / w_span if recovery_on else 0.0
     basis = int(env_par[e, EP_REC_BASIS])
     b0 = env_par[e, EP_RF_B0]
@@ -241,7 +220,7 @@ def _step_env(
     for k in range(n_axles):
         n_static = axle_par[e, k, AP_N_STATIC]
         normal = max(0.05 * n_static, n_static + axle_par[e, k, AP_K_TRANSFER] * decel0)
-        stiff = axle_par[e, k, AP_STIFF] * (normal / n_static) ** (2.0 / 3.0)
+        stiff = creep_stiffness(env_par, axle_par, e, k, normal)
         axle_state[e, k, AS_N] = normal
         axle_state[e, k, AS_STIFF] = stiff / normal  # creep stiffness per unit load
         axle_state[e, k, AS_INV_STIFF] = normal / stiff
@@ -252,12 +231,8 @@ def _step_env(
         t = env_state[e, ES_T]
         x = env_state[e, ES_X]
         if x * inv_dx >= env_state[e, ES_HEAD] + 1.0:  # the leading axle entered new rail
-            _advance_field(env_par, sections, env_state, field, e)
-        if t_rise > 0.0:
-            frac = (t - t_delay) / t_rise
-        else:
-            frac = 1.0 if t >= t_delay else 0.0
-        frac = min(1.0, max(0.0, frac))
+            advance_field(env_par, sections, env_state, field, e)
+        frac = demand_fraction(env_par, e, t)
         p_d = p_max * frac
         decel = env_state[e, ES_DECEL]
         # creep is evaluated at the predicted end-of-substep train speed, so that the wheel
@@ -266,9 +241,7 @@ def _step_env(
         v_c = max(v - decel * dt, 0.0)
         v_ref = max(v_c, v_eps)
         inv_v_ref = 1.0 / v_ref
-        pad = env_par[e, EP_PAD_SCALE] * max(
-            0.2, 1.0 + env_par[e, EP_PAD_SLOPE] * (v - env_par[e, EP_PAD_VREF])
-        )
+        pad = pad_factor(env_par, e, v)
         use_prev = j * dt < dead
         force_sum = 0.0
         for k in range(n_axles):
@@ -289,9 +262,7 @@ def _step_env(
                     axle_par[e, k, AP_CYL_VOLUME_L] * (p - p_new) * INV_P_ATM
                 )
             axle_state[e, k, AS_P] = p_new
-            torque = (
-                axle_par[e, k, AP_BRAKE_GAIN] * max(0.0, p_new - axle_par[e, k, AP_P_THRESH]) * pad
-            )
+            torque = brake_torque(axle_par, e, k, p_new, pad)
             # --- contact: rail under the axle -----------------------------------------------
             normal = axle_state[e, k, AS_N]
             k_n = axle_state[e, k, AS_STIFF]
@@ -303,9 +274,8 @@ def _step_env(
                 axle_state[e, k, AS_CONT] = field[e, cell % n_cells]
             cont = axle_state[e, k, AS_CONT]
             factor = axle_par[e, k, AP_MU_FACTOR]
-            level = (mu_clean - (mu_clean - mu_cont) * cont) * factor
-            # recovery can raise the level up to the clean rail's, never lower it
-            mu_rec = max(level, min(rec_gain * level, mu_clean * factor))
+            level = friction_level(env_par, e, cont, factor)
+            mu_rec = recovered_level(env_par, e, level, factor)
             # --- creep ----------------------------------------------------------------------
             r = axle_par[e, k, AP_RADIUS]
             omega = axle_state[e, k, AS_OMEGA]
@@ -326,7 +296,7 @@ def _step_env(
                 axle_state[e, k, AS_RF_S1] = b1 * kw_in - a1 * kw + axle_state[e, k, AS_RF_S2]
                 axle_state[e, k, AS_RF_S2] = b2 * kw_in - a2 * kw
                 axle_state[e, k, AS_KW] = kw
-                kw_eff = min(1.0, max(0.0, kw)) * cont
+                kw_eff = effective_removal(kw, cont)
             m, m_xi, m_w = adhesion(
                 law, axi, w, level, mu_rec, kw_eff, k_n, inv_k_n, lp0, lp1, lp2, lp3
             )
@@ -405,12 +375,13 @@ def _step_env(
             slide = v_mid - r * omega_mid
             # brake work from the torque that actually acted (less than T_b on a held wheel);
             # the substep is cut at standstill: scale its work to the travelled fraction h
-            brake_torque = force_used * r - inertia * d_omega * inv_dt
-            axle_acc[e, k, AA_BRAKE_E] += brake_torque * omega_mid * h
+            acting_torque = force_used * r - inertia * d_omega * inv_dt
+            axle_acc[e, k, AA_BRAKE_E] += acting_torque * omega_mid * h
             slide_work = force_used * slide * h
             axle_acc[e, k, AA_SLIDE_E] += slide_work
             axle_acc[e, k, AA_SLIDE_INT] += slide * h
             axle_acc[e, k, AA_SLIDE_SQ_INT] += slide * slide * h
+            axle_acc[e, k, AA_MAX_SLIDE] = max(axle_acc[e, k, AA_MAX_SLIDE], slide)
             # cleaning, dc/ds = -c (e_slide / E_clean + pass_removal) / dx, implicit Euler
             removal = (max(slide_work, 0.0) * inv_clean + pass_removal * v_mid * h) * inv_dx
             slot = int(axle_state[e, k, AS_CELL]) % n_cells
@@ -424,26 +395,26 @@ def _step_env(
     # --- once per control period: time-based metrics, sampled at the period's end -------------
     span = env_state[e, ES_T] - t_start
     v_end = env_state[e, ES_V]
+    slide_threshold = max(env_par[e, EP_SLIDE_THRESH], env_par[e, EP_SLIDE_REL] * v_end)
     for k in range(n_axles):
         if axle_state[e, k, AS_TORQUE] > 0.0:
+            level = axle_state[e, k, AS_MU_LEVEL]
             axle_acc[e, k, AA_ADH_INT] += abs(axle_state[e, k, AS_MU]) * span
-            axle_acc[e, k, AA_LEVEL_INT] += axle_state[e, k, AS_MU_LEVEL] * span
+            axle_acc[e, k, AA_LEVEL_INT] += level * span
+            avail = available_level(env_par, e, level, axle_par[e, k, AP_MU_FACTOR])
+            axle_acc[e, k, AA_AVAIL_INT] += avail * span
             axle_acc[e, k, AA_BRAKE_T] += span
         wheel = axle_state[e, k, AS_OMEGA] * axle_par[e, k, AP_RADIUS]
-        if wheel < LOCK_WHEEL_SPEED and v_end > LOCK_TRAIN_SPEED:
-            axle_acc[e, k, AA_LOCK_CUR] += span
-            axle_acc[e, k, AA_LOCK_MAX] = max(
-                axle_acc[e, k, AA_LOCK_MAX], axle_acc[e, k, AA_LOCK_CUR]
-            )
-        else:
-            axle_acc[e, k, AA_LOCK_CUR] = 0.0
-        if axle_state[e, k, AS_VENTING] > 0.0:
-            axle_acc[e, k, AA_VENT_CUR] += span
-            axle_acc[e, k, AA_VENT_MAX] = max(
-                axle_acc[e, k, AA_VENT_MAX], axle_acc[e, k, AA_VENT_CUR]
-            )
-        else:
-            axle_acc[e, k, AA_VENT_CUR] = 0.0
+        _spell(axle_acc, e, k, AA_LOCK_CUR, AA_LOCK_MAX, is_locked(wheel, v_end), span)
+        _spell(axle_acc, e, k, AA_SLIDE_CUR, AA_SLIDE_MAX, v_end - wheel > slide_threshold, span)
+        if v_end - wheel > slide_threshold:
+            axle_acc[e, k, AA_SLIDE_T] += span
+        venting = axle_state[e, k, AS_VENTING] > 0.0
+        if venting:
+            axle_acc[e, k, AA_VENT_T] += span
+            if axle_acc[e, k, AA_VENT_CUR] == 0.0:
+                axle_acc[e, k, AA_VALVE_CYCLES] += 1.0
+        _spell(axle_acc, e, k, AA_VENT_CUR, AA_VENT_MAX, venting, span)
     if stopped:
         env_state[e, ES_STOPPED] = 1.0
         env_state[e, ES_T_STOP] = env_state[e, ES_T]

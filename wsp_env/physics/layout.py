@@ -55,7 +55,10 @@ EP_INJ_UNTIL = 37  # s, injection stops at this time (-1: no injection)
 EP_N_SECTIONS = 38  # number of used rows of ``sections``
 EP_V_EPS = 39  # m/s, creepage regularisation speed
 EP_EXTRA_BRAKE_N = 40  # N at full demand: a brake force not through the wheels (track brake, ...)
-N_EP = 41
+EP_SLIDE_THRESH = 41  # m/s: a wheel slides (metrics: time and longest spell) when V - v_i
+EP_SLIDE_REL = 42  # exceeds max(EP_SLIDE_THRESH, EP_SLIDE_REL V)
+EP_STIFF_FACTOR = 43  # creep stiffness of the contaminated contact / Kalker's (rail.py)
+N_EP = 44
 
 # ---- per-axle parameters ---------------------------------------------------------------------
 AP_RADIUS = 0  # m, rolling radius
@@ -121,8 +124,15 @@ AA_ADH_INT = 7  # s, integral of |F|/N dt while braking
 AA_BRAKE_T = 8  # s, time with brake torque applied
 AA_VENT_CUR = 9  # s, current continuous vent
 AA_VENT_MAX = 10  # s, longest continuous vent
-AA_LEVEL_INT = 11  # s, integral of the friction level seen, dt (adhesion available)
-N_AA = 12
+AA_LEVEL_INT = 11  # s, integral of the friction level seen, dt (while braking)
+AA_AVAIL_INT = 12  # s, integral of the most the curve can give (recovered level), dt (braking)
+AA_MAX_SLIDE = 13  # m/s, largest sliding speed V - omega r
+AA_SLIDE_T = 14  # s, time sliding (above the slide threshold, EP_SLIDE_THRESH / EP_SLIDE_REL)
+AA_SLIDE_CUR = 15  # s, current continuous slide
+AA_SLIDE_MAX = 16  # s, longest continuous slide
+AA_VENT_T = 17  # s, total time the valve vents
+AA_VALVE_CYCLES = 18  # number of vent onsets (apply/hold -> vent)
+N_AA = 19
 
 # Valve commands (one float per axle per control period): a value in [0, 1] asks for that
 # fraction of the demand pressure; CMD_HOLD closes both valve seats (pressure held).

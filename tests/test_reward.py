@@ -1,0 +1,94 @@
+"""The default reward prices what the benchmark judges: for the classical WSP the stopping
+distance dominates the return; locking the wheels or braking less than the demand returns
+clearly less; damage is priced per axle and superlinearly."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from wsp_env import env_kernel as K
+from wsp_env.env import TERM_NAMES, RewardConfig, WSPBrakingVectorEnv
+from wsp_env.policy import make_policy
+
+
+class HalfDemand:
+    """Asks for half the demand on every valve, always (brakes less than it could)."""
+
+    name = "half_demand"
+    privileged = False
+
+    def bind(self, core) -> None:
+        self.shape = (core.n_envs, core.n_valves)
+
+    def reset(self, env_ids) -> None:
+        pass
+
+    def act(self, obs):
+        return np.zeros(self.shape, dtype=np.float32)
+
+
+def _episodes(policy, options, seeds=(0, 1)):
+    """Mean return, mean terms and mean stopping distance of one stop per seed."""
+    venv = WSPBrakingVectorEnv(num_envs=len(seeds), vehicle="uic_z1")
+    venv.reset(seed=list(seeds), options=options)
+    policy.bind(venv.core)
+    policy.reset(np.arange(len(seeds)))
+    n = len(seeds)
+    done = np.zeros(n, dtype=bool)
+    ret, terms, dist = np.zeros(n), np.zeros((n, len(TERM_NAMES))), np.zeros(n)
+    while not done.all():
+        _, r, term, trunc, info = venv.step(policy.act(venv.core.obs))
+        live = ~done
+        ret[live] += r[live]
+        terms[live] += np.stack([info["reward_terms"][t] for t in TERM_NAMES], axis=1)[live]
+        for i in np.flatnonzero(live & (term | trunc)):
+            done[i] = True
+            dist[i] = info["final_info"][i]["metrics"]["stopping_distance_m"]
+    return ret.mean(), dict(zip(TERM_NAMES, terms.mean(axis=0), strict=True)), dist.mean()
+
+
+CASES = {
+    "soap": {"rail": "soap", "mu_contaminated": 0.07, "speed_kmh": 100.0, "pattern": "uniform"},
+    "leaves": {"rail": "leaves", "mu_contaminated": 0.03, "speed_kmh": 80.0, "pattern": "uniform"},
+}
+
+
+@pytest.fixture(scope="module")
+def returns():
+    out = {}
+    for case, options in CASES.items():
+        for name in ("classical", "none"):
+            out[case, name] = _episodes(make_policy(name), options)
+        out[case, "half"] = _episodes(HalfDemand(), options)
+    return out
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_distance_dominates_the_classical_wsp_return(returns, case):
+    ret, terms, dist = returns[case, "classical"]
+    assert terms["distance"] == pytest.approx(-dist / RewardConfig().distance_scale_m, rel=1e-6)
+    assert terms["distance"] / ret > 0.8  # measured 0.93-0.95
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_locking_and_braking_less_return_clearly_less(returns, case):
+    """`none` locks the wheels; half demand brakes less than it may: both lose > 50 %."""
+    classical = returns[case, "classical"][0]
+    assert returns[case, "none"][0] < 1.5 * classical
+    assert returns[case, "half"][0] < 1.5 * classical
+
+
+def test_braking_less_loses_on_dry_rail():
+    classical, _, _ = _episodes(make_policy("classical"), {"rail": "dry", "speed_kmh": 100.0})
+    half, _, _ = _episodes(HalfDemand(), {"rail": "dry", "speed_kmh": 100.0})
+    assert half < 1.5 * classical
+
+
+def test_damage_is_superlinear_per_axle():
+    """4 MJ on one axle costs more than 1 MJ on each of four (and both more than nothing)."""
+    par = RewardConfig().vector()
+    one = K.damage_cost(4e6, par) + 3 * K.damage_cost(0.0, par)
+    spread = 4 * K.damage_cost(1e6, par)
+    assert K.damage_cost(0.0, par) == 0.0
+    assert one > 1.5 * spread > 0.0
