@@ -99,8 +99,11 @@ def test_rail_cleaning_is_reported_as_per_axle_adhesion(tmp_path, seed, speed):
             "adhesion_position",
             ("factor_beyond_step", 0.06 / 0.107, 0.1),
         ),
+        # soap, the same levels: beyond the step the wheels slide more and recover more, so the
+        # effective level falls less than the as-laid one (measured factor 0.68-0.69 against
+        # 0.56 over seeds 0-2, once the recovery's W_lim / W_max are re-chosen under the step)
         (
-            {"sections": OIL_STEP, "mu_contaminated": 0.06},  # soap, the same levels
+            {"sections": OIL_STEP, "mu_contaminated": 0.06},
             "adhesion_position",
             ("factor_beyond_step", 0.06 / 0.107, 0.3),
         ),
@@ -169,12 +172,15 @@ def test_calibrate_report_and_export_load_in_the_env(tmp_path):
     assert 0.03 < info["scenario"]["mu_contaminated"] < 0.2
     text = (report / "report.md").read_text()
     assert "gradient" in text and (report / "adhesion_curves.png").exists()
-    rail = yaml.safe_load(rails.read_text())["calibrated"]  # soap: the base law recovers
+    # a plain soap stop: the base law recovers, and the export carries it
+    plain = _trace(tmp_path, "plain")
+    assert main(["calibrate", str(plain), "--export", str(tmp_path / "plain.yaml")]) == 0
+    rail = yaml.safe_load((tmp_path / "plain.yaml").read_text())["calibrated"]
     assert rail["recovery"]["basis"] == "sliding_power" and rail["recovery"]["gain"] >= 1.0
 
 
 def _to_vendor_names(path):
-    """Rewrite a trace with the BCU's channel names and units (TRACE_FORMAT.md)."""
+    """Rewrite a trace with the BCU's channel names and units (docs/trace_format.md)."""
     import csv
 
     with path.open() as fh:

@@ -48,6 +48,7 @@ from typing import Any
 import numpy as np
 
 from wsp_env.calibration.adhesion_estimate import (
+    RECOVERY_GRID_KW,
     CriticalPoints,
     LawFit,
     fit_law,
@@ -370,6 +371,46 @@ def fit_adhesion_step(
     return best
 
 
+def _fit_extension(
+    trace: Trace,
+    trial: dict[str, bool],
+    pts: CriticalPoints,
+    removed: np.ndarray | None,
+    law_start: np.ndarray | None,
+    recovery_grid: dict[tuple[float, float], np.ndarray],
+) -> tuple[LawFit | None, float, tuple[float, float] | None]:
+    """The adhesion model with the extensions in ``trial``; returns the fit, the step position
+    (NaN without one) and the recovery's (W_lim, W_max - W_lim) in kW it used (``None``: the
+    base law's, or no recovery).
+
+    Where the base law recovers, its W_lim / W_max were chosen on data the extension's effect
+    blurred (a step in the rail's friction moves the sliding power at which the slides recover):
+    the extended model re-chooses them on the same grid (``RECOVERY_GRID_KW``; no new parameter),
+    the step's position held where the base recovery put it."""
+    step_m = float("nan")
+    if trial["position"]:
+        fit, step_m = fit_adhesion_step(
+            trace, trial["per_axle"], trial["load_transfer"], pts, removed, law_start
+        )
+        if fit is None:
+            return None, step_m, None
+    else:
+        fit = fit_adhesion_model(
+            trace, trial["per_axle"], trial["load_transfer"], None, pts, removed, law_start
+        )
+    step = None if math.isnan(step_m) else step_m
+    best: tuple[LawFit | None, tuple[float, float] | None] = (fit, None)
+    for grid, other in recovery_grid.items():
+        if other is removed:
+            continue
+        alt = fit_adhesion_model(
+            trace, trial["per_axle"], trial["load_transfer"], step, pts, other, law_start
+        )
+        if alt is not None and (best[0] is None or alt.chi2 < best[0].chi2):
+            best = (alt, grid)
+    return best[0], step_m, best[1]
+
+
 CANDIDATES_BALANCE = [
     Candidate("gradient", "gradient", "train_speed_balance_kmh", 1, _fit_gradient),
     Candidate(
@@ -427,13 +468,20 @@ def discover(trace: Trace) -> Result:
     adh_detail = chans["adhesion_fit_kN"].detail
     result.adhesion_law = {k: v for k, v in adh_detail.items() if k != "chi2"}
     adh_chi2 = adh_detail.get("chi2", float("nan"))
-    removed = None  # the base law's recovery, kept under every extension
+    removed = None  # the base law's recovery; its W_lim / W_max re-chosen under an extension
+    recovery_grid: dict[tuple[float, float], np.ndarray] = {}
     law_start = np.array([adh_detail.get(k, np.nan) for k in ("mu0", "K", "K_rozv")])
     if "recovery_w_lim_kW" in adh_detail:
         law_start = np.append(law_start, adh_detail["recovery_gain"])
         w_lim = adh_detail["recovery_w_lim_kW"]
         w_span = adh_detail["recovery_w_max_kW"] - w_lim
-        removed = removed_fraction(trace, w_lim, w_span)[points.sample, points.axle]
+        recovery_grid = {
+            grid: removed_fraction(trace, *grid)[points.sample, points.axle]
+            for grid in RECOVERY_GRID_KW
+        }
+        removed = recovery_grid.get((w_lim, w_span))
+        if removed is None:
+            removed = removed_fraction(trace, w_lim, w_span)[points.sample, points.axle]
     used: set[str] = set()
     for _ in range(MAX_EFFECTS):
         qualified: list[tuple] = []
@@ -501,21 +549,9 @@ def discover(trace: Trace) -> Result:
             if adhesion[key] or math.isnan(adh_rmse):
                 continue
             trial = dict(adhesion, **{key: True})
-            step_m = float("nan")
-            if trial["position"]:
-                fit, step_m = fit_adhesion_step(
-                    trace, trial["per_axle"], trial["load_transfer"], points, removed, law_start
-                )
-            else:
-                fit = fit_adhesion_model(
-                    trace,
-                    trial["per_axle"],
-                    trial["load_transfer"],
-                    None,
-                    points,
-                    removed,
-                    law_start,
-                )
+            fit, step_m, trial_recovery = _fit_extension(
+                trace, trial, points, removed, law_start, recovery_grid
+            )
             if fit is None or fit.at_bound:  # not identified (a parameter ran to its bound)
                 continue
             rmse1, x, n = fit.rmse, fit.params, fit.residual_kN.size
@@ -540,7 +576,9 @@ def discover(trace: Trace) -> Result:
                     params["bogie_pitch_kN_per_mps2"] = pitch[0]
                 else:
                     params.update({"step_position_m": step_m, "factor_beyond_step": segs[0]})
-                qualified.append((gain, key, params, fit.chi2, adh_rmse, rmse1, dbic, k))
+                qualified.append(
+                    (gain, key, params, (fit.chi2, trial_recovery), adh_rmse, rmse1, dbic, k)
+                )
         if not qualified:
             break
         # the channel with the largest relative cut goes first; on it, candidates whose remaining
@@ -567,7 +605,12 @@ def discover(trace: Trace) -> Result:
             continue
         if isinstance(cand, str):  # adhesion effect
             adhesion[cand] = True
-            adh_rmse, adh_chi2 = rmse1, new  # an adhesion entry carries its chi2 in that slot
+            # an adhesion entry carries its chi2 and its re-chosen recovery (if any) there
+            adh_rmse, (adh_chi2, new_recovery) = rmse1, new
+            if new_recovery is not None:
+                removed = recovery_grid[new_recovery]
+                result.adhesion_law["recovery_w_lim_kW"] = new_recovery[0]
+                result.adhesion_law["recovery_w_max_kW"] = sum(new_recovery)
             cat = {"per_axle": "adhesion_per_axle", "load_transfer": "load_transfer",
                    "position": "adhesion_position"}[cand]  # fmt: skip
             step = Step(cat, cat, "adhesion_fit_kN", params, rmse0, rmse1, dbic)
