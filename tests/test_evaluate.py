@@ -207,3 +207,19 @@ def test_classical_wsp_reapplies_in_steps_and_stays_silent_on_dry_rail():
     # pulses: a hold directly after an apply and an apply directly after a hold, many times
     assert np.sum(apply_[:-1] & hold[1:]) > 10 and np.sum(hold[:-1] & apply_[1:]) > 10
     assert np.any(soap == -1.0)
+
+
+def test_tuning_suite_shares_nothing_with_the_judging_suites():
+    """The classical WSP is tuned on `tuning` and judged on `en15595` and `heldout`: no seed,
+    case name or (rail, adhesion level) may be shared, or the judging suites would reward
+    tuning on themselves."""
+    tuning = load_suite("tuning")
+
+    def levels(suite):
+        return {(c.rail, c.mu_contaminated) for c in suite.cases if c.mu_contaminated is not None}
+
+    for name in ("en15595", "heldout"):
+        judged = load_suite(name)
+        assert not set(tuning.seeds) & set(judged.seeds), name
+        assert not {c.name for c in tuning.cases} & {c.name for c in judged.cases}, name
+        assert not levels(tuning) & levels(judged), name

@@ -73,8 +73,10 @@ def _build(out: Path, suite: Any, vehicle: str, results, summary, records) -> No
         "",
         "Reference distance: the stop an ideal controller would make using all the adhesion the "
         "rail as laid offers under each axle (no cleaning, no recovery), within the brake demand. "
-        "Utilisation = reference / actual stopping distance (above 1 when sliding cleaned the "
-        "rail or recovered adhesion). Pass/fail criteria are configurable EN 15595-style checks, "
+        "Extension = stop / reference - 1 (negative when sliding cleaned the rail or recovered "
+        "adhesion). Utilisation = the friction the axles used while braking over the most their "
+        "creep curves offered there (recovered level included; at most 1). "
+        "Pass/fail criteria are configurable EN 15595-style checks, "
         "not normative values: " + (", ".join(f"{k} {v:g}" for k, v in suite.criteria.items()) or "none") + ".",
         "",
         "## Overall",

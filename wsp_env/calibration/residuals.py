@@ -31,7 +31,9 @@ from wsp_env.calibration.adhesion_estimate import fit_base_law, pooled_points
 from wsp_env.calibration.traces import Trace
 
 MIN_SPEED_KMH = 10.0
-LOCK_KMH = 1.0  # a wheel slower than this is locked
+# a *measured* wheel speed below this reads as locked: above the speed sensors' noise
+# (0.05-0.5 km/h), unlike the simulator's exact 0.1 m/s (physics.integrator.is_locked)
+LOCK_KMH = 1.0
 COAST_MIN_S = 2.0
 ANCHOR_S = 1.0  # the balance's starting speed: the mean over this first stretch of the record
 
