@@ -209,17 +209,20 @@ def test_classical_wsp_reapplies_in_steps_and_stays_silent_on_dry_rail():
     assert np.any(soap == -1.0)
 
 
-def test_tuning_suite_shares_nothing_with_the_judging_suites():
-    """The classical WSP is tuned on `tuning` and judged on `en15595` and `heldout`: no seed,
-    case name or (rail, adhesion level) may be shared, or the judging suites would reward
-    tuning on themselves."""
-    tuning = load_suite("tuning")
+@pytest.mark.parametrize(
+    "chosen_on,judged_on",
+    [("tuning", "en15595"), ("tuning", "heldout"), ("validation", "heldout"),
+     ("validation", "en15595"), ("validation", "tuning")],
+)  # fmt: skip
+def test_selection_suites_share_nothing_with_the_judging_suites(chosen_on, judged_on):
+    """The classical WSP is tuned on `tuning`, learned controllers are selected on
+    `validation`, both are judged on `en15595` and `heldout`: no seed, case name or (rail,
+    adhesion level) may be shared, or the judging suites would reward tuning on themselves."""
 
     def levels(suite):
         return {(c.rail, c.mu_contaminated) for c in suite.cases if c.mu_contaminated is not None}
 
-    for name in ("en15595", "heldout"):
-        judged = load_suite(name)
-        assert not set(tuning.seeds) & set(judged.seeds), name
-        assert not {c.name for c in tuning.cases} & {c.name for c in judged.cases}, name
-        assert not levels(tuning) & levels(judged), name
+    chosen, judged = load_suite(chosen_on), load_suite(judged_on)
+    assert not set(chosen.seeds) & set(judged.seeds)
+    assert not {c.name for c in chosen.cases} & {c.name for c in judged.cases}
+    assert not levels(chosen) & levels(judged)

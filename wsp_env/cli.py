@@ -362,6 +362,69 @@ def _print_bench(result: dict[str, Any]) -> None:
     print(format_bench(result))
 
 
+# ---- train ----------------------------------------------------------------------------------
+
+
+def _add_train(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "train",
+        help="train a learned WSP controller (stable-baselines3) from a YAML config",
+        description="Train PPO / SAC / TD3 / A2C on WSPBraking-v0's native vector env, with "
+        "periodic validation against the frozen classical WSP, best-model selection and "
+        "checkpoints; --resume continues a run bit for bit. See wsp_env/training.py.",
+    )
+    p.add_argument("--config", default=None, help="configs/train/NAME.yaml (or a built-in NAME)")
+    p.add_argument("--out", default=None, help="run folder (new or empty; default: --resume's)")
+    p.add_argument("--seed", type=int, default=None, help="override the config's seed")
+    p.add_argument("--resume", default=None, help="continue the run in this folder")
+    p.add_argument(
+        "--total-timesteps", type=int, default=None, help="the run's total (default: config's)"
+    )
+    p.add_argument(
+        "--chunk-timesteps", type=int, default=None,
+        help="stop after about this many steps with a checkpoint (go on with --resume)",
+    )  # fmt: skip
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--json", dest="json_path", default=None, help="write the result here")
+    p.set_defaults(func=cmd_train)
+
+
+def cmd_train(args: argparse.Namespace) -> dict[str, Any]:
+    from wsp_env.training import train
+
+    if args.config is None and args.resume is None:
+        raise UserError("--config: required unless --resume")
+    out = args.out or args.resume
+    if out is None:
+        raise UserError("--out: required")
+    if args.total_timesteps is not None and args.total_timesteps < 1:
+        raise UserError("--total-timesteps: must be >= 1")
+    if args.chunk_timesteps is not None and args.chunk_timesteps < 1:
+        raise UserError("--chunk-timesteps: must be >= 1")
+    if args.seed is not None and args.resume is not None:
+        raise UserError("--seed: a resumed run keeps its own seed")
+    return train(
+        args.config, out, seed=args.seed, resume=args.resume,
+        total_timesteps=args.total_timesteps, progress=not args.no_progress,
+        chunk_timesteps=args.chunk_timesteps,
+    )  # fmt: skip
+
+
+def _print_train(result: dict[str, Any]) -> None:
+    best, cl = result["best_validation"], result["classical_validation"]
+    print(
+        f"{result['algo']}: {result['total_timesteps']:,} steps, {result['wall_time_s']:.0f} s "
+        f"({result['env_steps_per_s']:,.0f} env-steps/s this call)"
+    )
+    print(
+        f"best on {result['validation_suite']} at {best['timesteps']:,} steps: "
+        f"{best['passed']}/{best['runs']} passed, "
+        f"mean stop {best['mean_stopping_distance_m']:.0f} m "
+        f"(classical WSP {cl['passed']}/{cl['runs']}, {cl['mean_stopping_distance_m']:.0f} m)"
+    )
+    print(f"  wrote {result['model_path']}")
+
+
 # ---- validate -------------------------------------------------------------------------------
 
 
@@ -421,6 +484,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_evaluate(sub)
     _add_calibrate(sub)
     _add_bench(sub)
+    _add_train(sub)
     _add_validate(sub)
     return parser
 
@@ -430,6 +494,7 @@ PRINTERS = {
     "evaluate": _print_evaluate,
     "calibrate": _print_calibrate,
     "bench": _print_bench,
+    "train": _print_train,
     "validate": _print_validate,
 }
 

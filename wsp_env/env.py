@@ -316,6 +316,36 @@ class _BrakingCore:
             self.obs_par, self.reward_par, self.obs, self.terms, self.flags,
         )  # fmt: skip
 
+    # ---- state (checkpoints: a resumed training run continues bit for bit) -----------------
+
+    _STATE_ARRAYS = ("obs", "terms", "flags", "wsp", "prev_wheel", "prev_action",
+                     "episode_return", "episode_terms")  # fmt: skip
+    _SIM_ARRAYS = ("env_par", "axle_par", "sections", "env_state", "axle_state", "field",
+                   "env_acc", "axle_acc", "cmd", "initial_energy_J")  # fmt: skip
+
+    def state_dict(self) -> dict[str, Any]:
+        """Everything that evolves: the physics, the WSP observation state, the episodes'
+        scenarios and each environment's random generator (copies)."""
+        return {
+            "n_envs": self.n_envs,
+            "core": {k: getattr(self, k).copy() for k in self._STATE_ARRAYS},
+            "sim": {k: getattr(self.sim, k).copy() for k in self._SIM_ARRAYS},
+            "setups": list(self.sim.setups),
+            "rngs": [r.bit_generator.state for r in self.rngs],
+        }
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        """Restore ``state_dict``'s content into this core (same vehicle and ``n_envs``)."""
+        if state["n_envs"] != self.n_envs:
+            raise ValueError(f"state: {state['n_envs']} environments, this core has {self.n_envs}")
+        for k in self._STATE_ARRAYS:
+            getattr(self, k)[...] = state["core"][k]
+        for k in self._SIM_ARRAYS:
+            getattr(self.sim, k)[...] = state["sim"][k]
+        self.sim.setups[:] = state["setups"]
+        for r, s in zip(self.rngs, state["rngs"], strict=True):
+            r.bit_generator.state = s
+
     def episode_info(self, e: int) -> dict[str, Any]:
         metrics = run_metrics(self.sim, e)
         metrics["episode_return"] = float(self.episode_return[e])
@@ -454,7 +484,7 @@ class WSPBrakingVectorEnv(VectorEnv):
             mask[ended] = True
             for e in ended:  # only the environments that just ended
                 final_obs[e] = core.obs[e]
-                final_info[e] = {"metrics": core.episode_info(e)}
+                final_info[e] = {"metrics": core.episode_info(e), "scenario": core.describe(e)}
                 core.reset_env(int(e), None)
             info.update(
                 final_obs=final_obs, _final_obs=mask, final_info=final_info, _final_info=mask.copy()

@@ -257,7 +257,9 @@ def _run_group(
     bar: Any,
 ) -> tuple[list[dict[str, Any]], dict[tuple[str, int], RunRecord]]:
     """The runs of one vehicle, all environments of one batched core, stepped together."""
-    core = _BrakingCore(len(runs), vehicle=vehicle, max_time_s=max_time_s, **(env_kwargs or {}))
+    # a trained policy brings the settings its spaces need (action mode, valve grouping, ...)
+    kwargs = {**(env_kwargs or {}), **getattr(policy, "env_kwargs", {})}
+    core = _BrakingCore(len(runs), vehicle=vehicle, max_time_s=max_time_s, **kwargs)
     sim = core.sim
     available = np.zeros(len(runs))
     for e, run in enumerate(runs):

@@ -46,8 +46,14 @@ class NoWSP:
 class SB3Policy:
     """A trained stable-baselines3 model (``.zip``), deterministic actions.
 
-    If ``vecnormalize.pkl`` sits next to the model, its observation statistics are applied
-    (loaded with ``training=False``).
+    Found next to the model and applied: its observation normalisation — ``STEM.vecnormalize.pkl``
+    (what ``wsp-env train`` writes beside every model and checkpoint), else SB3's checkpoint
+    naming ``*_vecnormalize_N_steps.pkl``, else ``vecnormalize.pkl`` in the model's folder or
+    the run folder above it — and the environment settings it was trained with
+    (``config.yaml`` of its run: action mode, valve grouping, privileged observations, control
+    period), which the evaluation then uses (``env_kwargs``). A discrete-action model's valve
+    modes (0 vent, 1 hold, 2 fill) therefore reach a discrete-mode environment, never read as
+    continuous commands.
     """
 
     privileged = False
@@ -56,26 +62,43 @@ class SB3Policy:
         p = Path(path)
         if not p.exists():
             raise FileNotFoundError(f"{p}: no such policy file")
-        from stable_baselines3 import PPO, SAC, TD3
+        config = _run_config(p)
+        algo = config.get("algo") if config else None
+        import stable_baselines3 as sb3
 
+        classes = {"ppo": sb3.PPO, "sac": sb3.SAC, "td3": sb3.TD3, "a2c": sb3.A2C}
+        order = [classes[algo]] if algo in classes else list(classes.values())
         model = None
-        for cls in (PPO, SAC, TD3):
+        for cls in order:
             try:
                 model = cls.load(p, device="cpu")
                 break
             except Exception:
                 continue
         if model is None:
-            raise ValueError(f"{p}: not a stable-baselines3 model file (PPO, SAC or TD3)")
-        self.model = model
-        self.name = p.stem
-        self._norm = None
-        stats = p.with_name("vecnormalize.pkl")
-        if stats.exists():
-            import pickle
+            raise ValueError(f"{p}: not a stable-baselines3 model file (PPO, SAC, TD3 or A2C)")
+        env_kwargs = (config or {}).get("env_kwargs", {}) or {}
+        self._setup(model, _load_normalisation(p), env_kwargs, p.stem)
 
-            with stats.open("rb") as fh:
-                self._norm = pickle.load(fh)
+    @classmethod
+    def from_model(cls, model: Any, env_kwargs: dict[str, Any], name: str = "current") -> SB3Policy:
+        """A policy over a live model (training's validation): its normalisation as it is now."""
+        self = cls.__new__(cls)
+        self._setup(model, model.get_vec_normalize_env(), env_kwargs, name)
+        return self
+
+    def _setup(self, model: Any, norm: Any, env_kwargs: dict[str, Any], name: str) -> None:
+        """``norm``: a VecNormalize (its statistics are copied: a live one keeps learning)."""
+        import copy
+
+        self.model = model
+        self.name = name
+        self._obs_rms = copy.deepcopy(norm.obs_rms) if norm is not None else None
+        self._clip_obs = float(getattr(norm, "clip_obs", 10.0))
+        self._epsilon = float(getattr(norm, "epsilon", 1e-8))
+        self._norm_obs = bool(getattr(norm, "norm_obs", True))
+        self.env_kwargs = {k: env_kwargs[k] for k in POLICY_ENV_KWARGS if k in env_kwargs}
+        self.privileged = bool(self.env_kwargs.get("privileged", False))
 
     def bind(self, core: Any) -> None:
         space = self.model.observation_space
@@ -84,15 +107,63 @@ class SB3Policy:
                 f"policy {self.name}: trained on observations of shape {space.shape}, "
                 f"this environment gives {(core.obs_dim,)}"
             )
+        if self.model.action_space != core.action_space():
+            raise ValueError(
+                f"policy {self.name}: trained with actions {self.model.action_space}, this "
+                f"environment takes {core.action_space()} (its env_kwargs: action_mode, "
+                "valve_group)"
+            )
+        self._discrete = core.action_mode == "discrete"
 
     def reset(self, env_ids: np.ndarray) -> None:
         pass
 
+    def normalise(self, obs: np.ndarray) -> np.ndarray:
+        if self._obs_rms is None or not self._norm_obs:
+            return obs
+        rms = self._obs_rms
+        out = (obs - rms.mean) / np.sqrt(rms.var + self._epsilon)
+        return np.clip(out, -self._clip_obs, self._clip_obs).astype(np.float32)
+
     def act(self, obs: np.ndarray) -> np.ndarray:
-        if self._norm is not None:
-            obs = self._norm.normalize_obs(obs)
-        action, _ = self.model.predict(obs, deterministic=True)
-        return np.asarray(action, dtype=np.float32)
+        action, _ = self.model.predict(self.normalise(obs), deterministic=True)
+        return np.asarray(action, dtype=np.float64 if self._discrete else np.float32)
+
+
+# the environment settings a trained model needs in evaluation (its spaces and timing)
+POLICY_ENV_KWARGS = ("action_mode", "valve_group", "privileged", "control_period_s")
+
+
+def _run_config(model_path: Path) -> dict[str, Any] | None:
+    """The ``config.yaml`` of the training run a model file belongs to (its folder, or the run
+    folder above a checkpoint), or None."""
+    import yaml
+
+    for folder in (model_path.parent, *model_path.parents[:3]):
+        cfg = folder / "config.yaml"
+        if cfg.exists():
+            data = yaml.safe_load(cfg.read_text())
+            return data if isinstance(data, dict) else None
+    return None
+
+
+def _load_normalisation(model_path: Path) -> Any:
+    """The observation statistics saved with a model (see ``SB3Policy``), or None."""
+    import pickle
+    import re
+
+    candidates = [model_path.with_suffix(".vecnormalize.pkl")]
+    m = re.match(r"^(.*)_(\d+)_steps$", model_path.stem)
+    if m:  # SB3 CheckpointCallback: rl_model_1000_steps.zip + rl_model_vecnormalize_1000_steps.pkl
+        stem = f"{m.group(1)}_vecnormalize_{m.group(2)}_steps.pkl"
+        candidates.append(model_path.with_name(stem))
+    candidates += [model_path.parent / "vecnormalize.pkl"]
+    candidates += [model_path.parent.parent / "vecnormalize.pkl"]
+    for c in candidates:
+        if c.exists():
+            with c.open("rb") as fh:
+                return pickle.load(fh)  # a VecNormalize without its venv
+    return None
 
 
 def make_policy(name_or_path: str, wsp_config: str | None = None) -> Any:

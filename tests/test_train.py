@@ -1,0 +1,254 @@
+"""`wsp-env train`: configs, the run folder's contract, bit-for-bit resume, evaluation of what
+the trainer makes (normalisation, discrete actions), one-line errors. Tiny budgets: these test
+the machinery, not learning."""
+
+from __future__ import annotations
+
+import json
+import pickle
+import shutil
+
+import numpy as np
+import pytest
+import torch
+import yaml
+
+from wsp_env.cli import main
+from wsp_env.env import WSPBrakingVectorEnv, _BrakingCore
+from wsp_env.evaluation import load_suite, run_suite
+from wsp_env.policy import SB3Policy, make_policy
+from wsp_env.training import LinearSchedule, latest_checkpoint, load_train_config
+
+SUITE = {
+    "name": "tiny",
+    "description": "two short stops",
+    "seeds": [7],
+    "cases": [
+        {"name": "s", "rail": "soap", "mu_contaminated": 0.08, "pattern": "uniform",
+         "speeds_kmh": [30]},
+        {"name": "d", "rail": "dry", "pattern": "uniform", "speeds_kmh": [30]},
+    ],
+}  # fmt: skip
+
+
+def _config(tmp_path, **changes):
+    suite = tmp_path / "suite.yaml"
+    suite.write_text(yaml.safe_dump(SUITE))
+    cfg = {
+        "algo": "ppo", "n_envs": 8, "n_timesteps": 512, "seed": 3, "normalize": True,
+        "policy_kwargs": {"net_arch": [16, 16]}, "learning_rate": "lin_3e-4", "n_steps": 32,
+        "batch_size": 64, "n_epochs": 2, "gamma": 0.999,
+        "env_kwargs": {"vehicle": "uic_z1", "scenario": {"speed_kmh": [30, 40]}},
+        "eval": {"suite": str(suite), "every_timesteps": 256},
+        "checkpoint_every_timesteps": 256,
+    }  # fmt: skip
+    cfg.update(changes)
+    path = tmp_path / f"{cfg['algo']}_{len(list(tmp_path.glob('*.yaml')))}.yaml"
+    path.write_text(yaml.safe_dump(cfg))
+    return path
+
+
+SAC = {
+    "algo": "sac", "n_envs": 4, "n_timesteps": 400, "normalize": {"norm_reward": False},
+    "learning_rate": 3e-4, "buffer_size": 10000, "learning_starts": 100, "batch_size": 32,
+    "train_freq": 1, "gradient_steps": 1, "checkpoint_every_timesteps": 200,
+}  # fmt: skip
+
+
+def _sac(tmp_path):
+    cfg = yaml.safe_load(_config(tmp_path).read_text())
+    for key in ("n_steps", "n_epochs"):  # PPO's
+        cfg.pop(key)
+    cfg.update(SAC)
+    cfg["eval"]["every_timesteps"] = 200
+    path = tmp_path / "sac.yaml"
+    path.write_text(yaml.safe_dump(cfg))
+    return path
+
+
+def _params(model_path):
+    from stable_baselines3 import PPO, SAC
+
+    for cls in (PPO, SAC):
+        try:
+            return cls.load(model_path, device="cpu").policy.state_dict()
+        except Exception:
+            continue
+    raise AssertionError(model_path)
+
+
+def _same(a, b):
+    return all(torch.equal(a[k], b[k]) for k in a)
+
+
+@pytest.fixture(scope="module")
+def ppo_run(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("train")
+    out = tmp / "run"
+    code = main(["train", "--config", str(_config(tmp)), "--out", str(out), "--no-progress",
+                 "--json", str(tmp / "train.json")])  # fmt: skip
+    return code, tmp, out
+
+
+def test_train_writes_the_contract(ppo_run):
+    code, tmp, out = ppo_run
+    assert code == 0
+    result = json.loads((tmp / "train.json").read_text())
+    for key in ("model_path", "algo", "total_timesteps", "wall_time_s", "env_steps_per_s",
+                "best_validation"):  # fmt: skip
+        assert key in result
+    assert result["algo"] == "ppo" and result["total_timesteps"] == 512 and result["finished"]
+    assert result["env_steps_per_s"] > 0
+    for name in ("config.yaml", "model.zip", "model.vecnormalize.pkl", "best_model.zip",
+                 "best_model.vecnormalize.pkl", "validation.json", "progress.csv"):  # fmt: skip
+        assert (out / name).exists(), name
+    assert latest_checkpoint(out).name == "step_512"
+    assert list((out / "logs" / "from_step_0").glob("events.out.tfevents.*"))  # TensorBoard
+    validation = json.loads((out / "validation.json").read_text())
+    # the classical WSP on the same suite, and the policy at every evaluation (256, 512)
+    assert validation["classical"]["runs"] == 2
+    assert [row["timesteps"] for row in validation["history"]] == [256, 512]
+    best = result["best_validation"]
+    assert best in validation["history"] and best["stop_vs_classical"] > 0
+    # the exact config (seed included) is kept, and it loads again
+    kept = load_train_config(out / "config.yaml")
+    assert kept.seed == 3 and isinstance(
+        kept.hyperparams["learning_rate"], str
+    )  # the schedule as written
+
+
+def test_a_trained_model_evaluates_and_simulates(ppo_run, tmp_path):
+    _, tmp, out = ppo_run
+    suite = str(tmp / "suite.yaml")
+    js = tmp_path / "eval.json"
+    assert main(["evaluate", "--policy", str(out / "best_model.zip"), "--policy", "classical",
+                 "--suite", suite, "--json", str(js)]) == 0  # fmt: skip
+    runs = json.loads(js.read_text())["runs"]
+    assert {r["policy"] for r in runs} == {"best_model", "classical"} and len(runs) == 4
+    sim = tmp_path / "sim.json"
+    assert main(["simulate", "--policy", str(out / "model.zip"), "--speed-kmh", "30",
+                 "--json", str(sim)]) == 0  # fmt: skip
+    assert json.loads(sim.read_text())["stopping_distance_m"] > 0
+
+
+def test_normalisation_is_found_under_any_checkpoint_name(ppo_run, tmp_path):
+    _, _, out = ppo_run
+    ckpt = latest_checkpoint(out) / "model.zip"
+    policy = SB3Policy(ckpt)
+    with (ckpt.parent / "model.vecnormalize.pkl").open("rb") as fh:
+        saved = pickle.load(fh)
+    np.testing.assert_array_equal(policy._obs_rms.mean, saved.obs_rms.mean)
+    # SB3's CheckpointCallback naming
+    shutil.copy(ckpt, tmp_path / "rl_model_512_steps.zip")
+    shutil.copy(
+        ckpt.parent / "model.vecnormalize.pkl", tmp_path / "rl_model_vecnormalize_512_steps.pkl"
+    )
+    other = SB3Policy(tmp_path / "rl_model_512_steps.zip")
+    np.testing.assert_array_equal(other._obs_rms.mean, saved.obs_rms.mean)
+    obs = np.full((1, saved.obs_rms.mean.size), 0.3, dtype=np.float32)
+    np.testing.assert_allclose(other.normalise(obs), saved.normalize_obs(obs), rtol=1e-6)
+
+
+@pytest.mark.parametrize("algo", ["ppo", "sac"])
+def test_resume_in_chunks_is_bit_for_bit(tmp_path, algo):
+    """A run stopped half way (--chunk-timesteps) and resumed ends with exactly the weights
+    and normalisation of the run trained in one go: the schedules follow the run's total, the
+    environments' physics and random generators, torch's and numpy's random state (and SAC's
+    replay buffer) come back from the checkpoint."""
+    cfg = _config(tmp_path) if algo == "ppo" else _sac(tmp_path)
+    half = "256" if algo == "ppo" else "200"
+    one, part, rest = tmp_path / "one", tmp_path / "part", tmp_path / "rest"
+    assert main(["train", "--config", str(cfg), "--out", str(one), "--no-progress"]) == 0
+    assert main(["train", "--config", str(cfg), "--out", str(part), "--no-progress",
+                 "--chunk-timesteps", half]) == 0  # fmt: skip
+    assert json.loads((part / "train.json").read_text())["finished"] is False
+    assert main(["train", "--resume", str(part), "--out", str(rest), "--no-progress"]) == 0
+    assert _same(_params(one / "model.zip"), _params(rest / "model.zip"))
+    with (
+        (one / "model.vecnormalize.pkl").open("rb") as a,
+        (rest / "model.vecnormalize.pkl").open("rb") as b,
+    ):
+        np.testing.assert_array_equal(pickle.load(a).obs_rms.var, pickle.load(b).obs_rms.var)
+    # the chunked run's history holds both evaluations, as the one-go run's does
+    hist = json.loads((rest / "validation.json").read_text())["history"]
+    assert [h["timesteps"] for h in hist] == [int(half), 2 * int(half)]
+
+
+def test_another_seed_is_another_run(ppo_run, tmp_path):
+    _, tmp, out = ppo_run
+    cfg = tmp / "ppo_1.yaml" if (tmp / "ppo_1.yaml").exists() else next(tmp.glob("ppo_*.yaml"))
+    other = tmp_path / "other"
+    assert main(["train", "--config", str(cfg), "--out", str(other), "--seed", "4",
+                 "--no-progress", "--total-timesteps", "512"]) == 0  # fmt: skip
+    assert not _same(_params(out / "model.zip"), _params(other / "model.zip"))
+
+
+def test_discrete_models_are_evaluated_in_discrete_mode(tmp_path):
+    """A model trained on valve modes (0 vent, 1 hold, 2 fill) brings its action mode to the
+    evaluation: its outputs are never read as continuous valve commands."""
+    env_kwargs = {"vehicle": "uic_z1", "action_mode": "discrete",
+                  "scenario": {"speed_kmh": [30, 40]}}  # fmt: skip
+    cfg = _config(tmp_path, env_kwargs=env_kwargs, n_timesteps=256)
+    out = tmp_path / "run"
+    assert main(["train", "--config", str(cfg), "--out", str(out), "--no-progress"]) == 0
+    policy = make_policy(str(out / "model.zip"))
+    assert policy.env_kwargs["action_mode"] == "discrete"
+    with pytest.raises(ValueError, match="actions"):
+        policy.bind(_BrakingCore(2))  # a continuous environment refuses it
+    core = _BrakingCore(2, action_mode="discrete")
+    policy.bind(core)
+    actions = policy.act(core.obs)
+    assert actions.shape == (2, 4) and np.isin(actions, (0, 1, 2)).all()
+    results, _ = run_suite("uic_z1", load_suite(str(tmp_path / "suite.yaml")), policy)
+    assert len(results) == 2 and all(r["stopped"] for r in results)
+
+
+@pytest.mark.parametrize(
+    "changes,field",
+    [
+        ({"learning_rat": 1e-3}, "learning_rat: unknown"),
+        ({"learning_rate": "lin_x"}, "learning_rate"),
+        ({"algo": "dqn"}, "algo"),
+        ({"n_envs": 0}, "n_envs"),
+        ({"policy_kwargs": {"activation_fn": "sigmoidal"}}, "policy_kwargs.activation_fn"),
+        ({"env_kwargs": {"reward": {"air_m_per_litre": 1.0}}}, "env_kwargs.reward.air_m_per_litre"),
+        ({"env_kwargs": {"vehicle": "tgv"}}, "env_kwargs"),
+        ({"env_kwargs": {"scenario": {"rails": {"ice": 1.0}}}}, "env_kwargs.scenario.rails.ice"),
+        ({"eval": {"suite": "heldout"}}, "eval.suite"),
+    ],
+)
+def test_bad_config_is_one_line_naming_file_and_field(tmp_path, capsys, changes, field):
+    cfg = _config(tmp_path, **changes)
+    out = tmp_path / "run"
+    assert main(["train", "--config", str(cfg), "--out", str(out), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and str(cfg) in err and field in err, err
+    assert not out.exists()  # nothing half-written
+
+
+def test_resume_without_checkpoint_and_occupied_out_are_refused(tmp_path, capsys):
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    assert main(["train", "--resume", str(empty), "--no-progress"]) == 2
+    assert "no checkpoint" in capsys.readouterr().err
+    busy = tmp_path / "busy"
+    busy.mkdir()
+    (busy / "x").write_text("keep me")
+    assert main(["train", "--config", str(_config(tmp_path)), "--out", str(busy)]) == 2
+    assert (busy / "x").read_text() == "keep me"
+
+
+def test_schedules_and_episode_scenarios():
+    assert LinearSchedule(3e-4)(1.0) == 3e-4 and LinearSchedule(3e-4)(0.5) == 1.5e-4
+    # an episode's end carries its scenario, so learning curves split by condition
+    venv = WSPBrakingVectorEnv(num_envs=2, scenario={"speed_kmh": [20, 25]})
+    venv.reset(seed=0)
+    for _ in range(3000):
+        _, _, term, trunc, info = venv.step(np.ones((2, 4), dtype=np.float32))
+        if (term | trunc).any():
+            e = int(np.flatnonzero(term | trunc)[0])
+            assert {"rail", "speed_kmh", "mu_contaminated"} <= set(
+                info["final_info"][e]["scenario"]
+            )
+            return
+    raise AssertionError("no episode ended")
