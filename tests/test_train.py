@@ -67,9 +67,10 @@ def _sac(tmp_path):
 
 
 def _params(model_path):
+    from sb3_contrib import RecurrentPPO
     from stable_baselines3 import PPO, SAC
 
-    for cls in (PPO, SAC):
+    for cls in (PPO, SAC, RecurrentPPO):
         try:
             return cls.load(model_path, device="cpu").policy.state_dict()
         except Exception:
@@ -124,7 +125,7 @@ def test_a_trained_model_evaluates_and_simulates(ppo_run, tmp_path):
     assert main(["evaluate", "--policy", str(out / "best_model.zip"), "--policy", "classical",
                  "--suite", suite, "--json", str(js)]) == 0  # fmt: skip
     runs = json.loads(js.read_text())["runs"]
-    assert {r["policy"] for r in runs} == {"best_model", "classical"} and len(runs) == 4
+    assert {r["policy"] for r in runs} == {"run/best_model", "classical"} and len(runs) == 4
     sim = tmp_path / "sim.json"
     assert main(["simulate", "--policy", str(out / "model.zip"), "--speed-kmh", "30",
                  "--json", str(sim)]) == 0  # fmt: skip
@@ -149,14 +150,22 @@ def test_normalisation_is_found_under_any_checkpoint_name(ppo_run, tmp_path):
     np.testing.assert_allclose(other.normalise(obs), saved.normalize_obs(obs), rtol=1e-6)
 
 
-@pytest.mark.parametrize("algo", ["ppo", "sac"])
-def test_resume_in_chunks_is_bit_for_bit(tmp_path, algo):
+RECURRENT = {"algo": "recurrent_ppo", "policy_kwargs": {"net_arch": [16], "lstm_hidden_size": 8}}
+
+
+@pytest.mark.parametrize("kind", ["ppo", "sac", "frame_stack", "recurrent_ppo"])
+def test_resume_in_chunks_is_bit_for_bit(tmp_path, kind):
     """A run stopped half way (--chunk-timesteps) and resumed ends with exactly the weights
     and normalisation of the run trained in one go: the schedules follow the run's total, the
     environments' physics and random generators, torch's and numpy's random state (and SAC's
-    replay buffer) come back from the checkpoint."""
-    cfg = _config(tmp_path) if algo == "ppo" else _sac(tmp_path)
-    half = "256" if algo == "ppo" else "200"
+    replay buffer, the frame stack, the LSTM state) come back from the checkpoint."""
+    cfg = {
+        "ppo": lambda: _config(tmp_path),
+        "sac": lambda: _sac(tmp_path),
+        "frame_stack": lambda: _config(tmp_path, frame_stack=3),
+        "recurrent_ppo": lambda: _config(tmp_path, **RECURRENT),
+    }[kind]()
+    half = "200" if kind == "sac" else "256"
     one, part, rest = tmp_path / "one", tmp_path / "part", tmp_path / "rest"
     assert main(["train", "--config", str(cfg), "--out", str(one), "--no-progress"]) == 0
     assert main(["train", "--config", str(cfg), "--out", str(part), "--no-progress",
@@ -252,3 +261,28 @@ def test_schedules_and_episode_scenarios():
             )
             return
     raise AssertionError("no episode ended")
+
+
+@pytest.mark.parametrize("changes", [{"frame_stack": 3}, RECURRENT])
+def test_stacked_and_recurrent_policies_evaluate_with_their_memory(tmp_path, changes):
+    """The evaluation rebuilds a frame-stacked policy's stack and carries a recurrent policy's
+    state, reset per episode: acting twice on the same observation after a reset gives the
+    same first action, and the state/stack then differs from a fresh episode's."""
+    out = tmp_path / "run"
+    cfg = _config(tmp_path, n_timesteps=256, **changes)
+    assert main(["train", "--config", str(cfg), "--out", str(out), "--no-progress"]) == 0
+    policy = make_policy(str(out / "model.zip"))
+    core = _BrakingCore(2)
+    policy.bind(core)
+    policy.reset(np.arange(2))
+    first = policy.act(core.obs)
+    policy.act(core.obs)
+    memory = policy._stack.copy() if policy.n_stack > 1 else policy._state
+    policy.reset(np.arange(2))
+    np.testing.assert_array_equal(policy.act(core.obs), first)
+    if policy.n_stack > 1:
+        assert policy._stack.shape == (2, 3 * core.obs_dim) and np.abs(memory).sum() > 0
+    else:
+        assert policy.recurrent and memory is not None
+    results, _ = run_suite("uic_z1", load_suite(str(tmp_path / "suite.yaml")), policy)
+    assert len(results) == 2 and all(r["stopped"] for r in results)

@@ -53,7 +53,10 @@ class SB3Policy:
     (``config.yaml`` of its run: action mode, valve grouping, privileged observations, control
     period), which the evaluation then uses (``env_kwargs``). A discrete-action model's valve
     modes (0 vent, 1 hold, 2 fill) therefore reach a discrete-mode environment, never read as
-    continuous commands.
+    continuous commands. Frame-stacked policies (``frame_stack`` in the run's config) get the
+    stack built as ``VecFrameStack`` builds it (normalised frames, newest last, zeros at an
+    episode's start); recurrent ones (RecurrentPPO) carry their LSTM state from step to step,
+    reset with each episode.
     """
 
     privileged = False
@@ -67,6 +70,12 @@ class SB3Policy:
         import stable_baselines3 as sb3
 
         classes = {"ppo": sb3.PPO, "sac": sb3.SAC, "td3": sb3.TD3, "a2c": sb3.A2C}
+        try:
+            import sb3_contrib
+
+            classes.update(recurrent_ppo=sb3_contrib.RecurrentPPO, tqc=sb3_contrib.TQC)
+        except ImportError:  # sb3-contrib is optional
+            pass
         order = [classes[algo]] if algo in classes else list(classes.values())
         model = None
         for cls in order:
@@ -78,16 +87,23 @@ class SB3Policy:
         if model is None:
             raise ValueError(f"{p}: not a stable-baselines3 model file (PPO, SAC, TD3 or A2C)")
         env_kwargs = (config or {}).get("env_kwargs", {}) or {}
-        self._setup(model, _load_normalisation(p), env_kwargs, p.stem)
+        n_stack = int((config or {}).get("frame_stack", 1) or 1)
+        # a run folder's models share stems (best_model, model): the folder tells them apart
+        name = f"{p.parent.name}/{p.stem}" if config is not None else p.stem
+        self._setup(model, _load_normalisation(p), env_kwargs, name, n_stack)
 
     @classmethod
-    def from_model(cls, model: Any, env_kwargs: dict[str, Any], name: str = "current") -> SB3Policy:
+    def from_model(
+        cls, model: Any, env_kwargs: dict[str, Any], name: str = "current", n_stack: int = 1
+    ) -> SB3Policy:
         """A policy over a live model (training's validation): its normalisation as it is now."""
         self = cls.__new__(cls)
-        self._setup(model, model.get_vec_normalize_env(), env_kwargs, name)
+        self._setup(model, model.get_vec_normalize_env(), env_kwargs, name, n_stack)
         return self
 
-    def _setup(self, model: Any, norm: Any, env_kwargs: dict[str, Any], name: str) -> None:
+    def _setup(
+        self, model: Any, norm: Any, env_kwargs: dict[str, Any], name: str, n_stack: int = 1
+    ) -> None:
         """``norm``: a VecNormalize (its statistics are copied: a live one keeps learning)."""
         import copy
 
@@ -99,13 +115,18 @@ class SB3Policy:
         self._norm_obs = bool(getattr(norm, "norm_obs", True))
         self.env_kwargs = {k: env_kwargs[k] for k in POLICY_ENV_KWARGS if k in env_kwargs}
         self.privileged = bool(self.env_kwargs.get("privileged", False))
+        self.n_stack = n_stack
+        self.recurrent = hasattr(model.policy, "lstm_actor")
+        self._stack: np.ndarray | None = None
+        self._state: Any = None
+        self._episode_start: np.ndarray | None = None
 
     def bind(self, core: Any) -> None:
         space = self.model.observation_space
-        if space.shape != (core.obs_dim,):
+        if space.shape != (core.obs_dim * self.n_stack,):
             raise ValueError(
                 f"policy {self.name}: trained on observations of shape {space.shape}, "
-                f"this environment gives {(core.obs_dim,)}"
+                f"this environment gives {(core.obs_dim,)} x {self.n_stack} stacked"
             )
         if self.model.action_space != core.action_space():
             raise ValueError(
@@ -114,9 +135,16 @@ class SB3Policy:
                 "valve_group)"
             )
         self._discrete = core.action_mode == "discrete"
+        self._stack = np.zeros((core.n_envs, core.obs_dim * self.n_stack), dtype=np.float32)
+        self._state = None
+        self._episode_start = np.ones(core.n_envs, dtype=bool)
 
     def reset(self, env_ids: np.ndarray) -> None:
-        pass
+        """New episodes: their frame stacks emptied, their recurrent state restarted."""
+        if self._stack is not None:
+            self._stack[env_ids] = 0.0
+        if self._episode_start is not None:
+            self._episode_start[env_ids] = True
 
     def normalise(self, obs: np.ndarray) -> np.ndarray:
         if self._obs_rms is None or not self._norm_obs:
@@ -126,7 +154,20 @@ class SB3Policy:
         return np.clip(out, -self._clip_obs, self._clip_obs).astype(np.float32)
 
     def act(self, obs: np.ndarray) -> np.ndarray:
-        action, _ = self.model.predict(self.normalise(obs), deterministic=True)
+        x = self.normalise(obs)
+        if self.n_stack > 1:
+            assert self._stack is not None, "bind first"
+            width = x.shape[1]
+            self._stack[:, :-width] = self._stack[:, width:]
+            self._stack[:, -width:] = x
+            x = self._stack.copy()
+        if self.recurrent:
+            action, self._state = self.model.predict(
+                x, state=self._state, episode_start=self._episode_start, deterministic=True
+            )
+            self._episode_start[:] = False
+        else:
+            action, _ = self.model.predict(x, deterministic=True)
         return np.asarray(action, dtype=np.float64 if self._discrete else np.float32)
 
 

@@ -53,10 +53,14 @@ import yaml
 
 from wsp_env.config import ConfigError, _configs_root, read_yaml
 
-ALGO_NAMES = ("ppo", "sac", "td3", "a2c")
-OFF_POLICY = ("sac", "td3")
+ALGO_NAMES = ("ppo", "sac", "td3", "a2c", "recurrent_ppo", "tqc")  # the last two: sb3-contrib
+OFF_POLICY = ("sac", "td3", "tqc")
+RECURRENT = ("recurrent_ppo",)
 ACTIVATIONS = ("tanh", "relu", "elu", "leaky_relu", "gelu")
-POLICY_KWARGS = ("net_arch", "activation_fn", "log_std_init", "ortho_init", "n_critics")
+POLICY_KWARGS = (
+    "net_arch", "activation_fn", "log_std_init", "ortho_init", "n_critics", "n_quantiles",
+    "lstm_hidden_size", "n_lstm_layers", "enable_critic_lstm", "shared_lstm",
+)  # fmt: skip
 # keyword arguments of the algorithm that the trainer sets itself
 MANAGED = ("policy", "env", "seed", "policy_kwargs", "tensorboard_log", "verbose", "device")
 ENV_KWARGS = (
@@ -89,6 +93,7 @@ class TrainConfig:
     n_timesteps: int
     policy: str = "MlpPolicy"
     n_envs: int = 64
+    frame_stack: int = 1
     seed: int = 0
     normalize: dict[str, Any] | None = None
     policy_kwargs: dict[str, Any] = field(default_factory=dict)
@@ -101,7 +106,8 @@ class TrainConfig:
     def as_yaml_dict(self) -> dict[str, Any]:
         """The config as a file would hold it (what ``config.yaml`` in a run folder keeps)."""
         out: dict[str, Any] = {"algo": self.algo, "policy": self.policy, "n_envs": self.n_envs,
-                               "n_timesteps": self.n_timesteps, "seed": self.seed}  # fmt: skip
+                               "n_timesteps": self.n_timesteps, "seed": self.seed,
+                               "frame_stack": self.frame_stack}  # fmt: skip
         out["normalize"] = self.normalize if self.normalize is not None else False
         if self.policy_kwargs:
             out["policy_kwargs"] = self.policy_kwargs
@@ -113,6 +119,10 @@ class TrainConfig:
 
 
 def _algo_class(name: str) -> type:
+    if name in ("recurrent_ppo", "tqc"):
+        import sb3_contrib
+
+        return {"recurrent_ppo": sb3_contrib.RecurrentPPO, "tqc": sb3_contrib.TQC}[name]
     import stable_baselines3 as sb3
 
     return {"ppo": sb3.PPO, "sac": sb3.SAC, "td3": sb3.TD3, "a2c": sb3.A2C}[name]
@@ -200,10 +210,12 @@ def parse_train_config(data: Any, source: str = "") -> TrainConfig:
     if "n_timesteps" not in data:
         raise ConfigError("n_timesteps: missing required field")
     n_timesteps = _int(data.pop("n_timesteps"), "n_timesteps")
-    policy = data.pop("policy", "MlpPolicy")
-    if policy != "MlpPolicy":
-        raise ConfigError(f"policy: {policy!r} is not MlpPolicy (flat observations)")
+    want = "MlpLstmPolicy" if algo in RECURRENT else "MlpPolicy"
+    policy = data.pop("policy", want)
+    if policy != want:
+        raise ConfigError(f"policy: {policy!r} is not {want} (flat observations, {algo})")
     n_envs = _int(data.pop("n_envs", 64), "n_envs")
+    frame_stack = _int(data.pop("frame_stack", 1), "frame_stack")
     seed = _int(data.pop("seed", 0), "seed", low=0)
     normalize = data.pop("normalize", False)
     if normalize is True:
@@ -250,8 +262,8 @@ def parse_train_config(data: Any, source: str = "") -> TrainConfig:
                               f"hyperparameter)")  # fmt: skip
         parse_schedule(v, k)  # a malformed schedule is a config error now, not at training
         hyper[k] = v
-    cfg = TrainConfig(algo, n_timesteps, policy, n_envs, seed, normalize, policy_kwargs, hyper,
-                      env_kwargs, eval_cfg, every, source)  # fmt: skip
+    cfg = TrainConfig(algo, n_timesteps, policy, n_envs, frame_stack, seed, normalize,
+                      policy_kwargs, hyper, env_kwargs, eval_cfg, every, source)  # fmt: skip
     check_env_kwargs(cfg.env_kwargs)
     return cfg
 
@@ -312,6 +324,15 @@ def _wrap_normalize(cfg: TrainConfig, venv: Any) -> Any:
     return VecNormalize(venv, **kwargs)
 
 
+def _wrap_frame_stack(cfg: TrainConfig, env: Any) -> Any:
+    """Stacked frames over the normalised observations (rl-baselines3-zoo's order)."""
+    if cfg.frame_stack == 1:
+        return env
+    from stable_baselines3.common.vec_env import VecFrameStack
+
+    return VecFrameStack(env, cfg.frame_stack)
+
+
 def _braking_core(env: Any) -> Any:
     """The ``_BrakingCore`` under an SB3 env (through VecNormalize if any)."""
     while not hasattr(env, "venv") or not hasattr(env.venv, "core"):
@@ -344,6 +365,9 @@ def _save_checkpoint(model: Any, cfg: TrainConfig, folder: Path) -> None:
         "numpy_rng": np.random.get_state(),  # noqa: NPY002 (SB3 draws from numpy's global)
         "python_rng": random.getstate(),
         "norm_returns": None if norm is None else norm.returns.copy(),
+        "stacked_obs": _stacked(model.get_env()),
+        # RecurrentPPO keeps its rollout's LSTM state out of the model file
+        "lstm_states": getattr(model, "_last_lstm_states", None),
         "num_timesteps": model.num_timesteps,
         "run_total_timesteps": model.run_total_timesteps,
     }
@@ -351,6 +375,12 @@ def _save_checkpoint(model: Any, cfg: TrainConfig, folder: Path) -> None:
         pickle.dump(state, fh)
     shutil.rmtree(folder, ignore_errors=True)
     tmp.rename(folder)
+
+
+def _stacked(env: Any) -> np.ndarray | None:
+    """The frame stack's buffer (VecFrameStack is the outermost wrapper), or None."""
+    buf = getattr(getattr(env, "stacked_obs", None), "stacked_obs", None)
+    return None if buf is None else np.array(buf, copy=True)
 
 
 def latest_checkpoint(run_dir: Path) -> Path | None:
@@ -467,7 +497,9 @@ class Validator:
         from wsp_env.evaluation import run_suite
         from wsp_env.policy import SB3Policy
 
-        policy = SB3Policy.from_model(model, self.cfg.env_kwargs, name="current")
+        policy = SB3Policy.from_model(
+            model, self.cfg.env_kwargs, name="current", n_stack=self.cfg.frame_stack
+        )
         kwargs = {**self.env_kwargs, **policy.env_kwargs}
         results, _ = run_suite(self.vehicle, self.suite, policy, record="none", env_kwargs=kwargs)
         row = {"timesteps": int(model.num_timesteps), **summarise_validation(results)}
@@ -564,9 +596,14 @@ def train(
         if cfg.normalize is not None:
             env = VecNormalize.load(str(ckpt / "model.vecnormalize.pkl"), venv)
             env.returns = state["norm_returns"]
+        env = _wrap_frame_stack(cfg, env)
+        if state.get("stacked_obs") is not None:
+            env.stacked_obs.stacked_obs[...] = state["stacked_obs"]
         model = cls.load(ckpt / "model.zip", env=env, device="cpu", force_reset=False)
         if cfg.algo in OFF_POLICY:
             model.load_replay_buffer(ckpt / "replay_buffer.pkl")
+        if state.get("lstm_states") is not None:
+            model._last_lstm_states = state["lstm_states"]
         torch.set_rng_state(state["torch_rng"])
         np.random.set_state(state["numpy_rng"])  # noqa: NPY002 (SB3 draws from numpy's global)
         random.setstate(state["python_rng"])
@@ -574,7 +611,7 @@ def train(
         total = int(total_timesteps or state["run_total_timesteps"])
     else:
         total = int(total_timesteps or cfg.n_timesteps)
-        env = _wrap_normalize(cfg, venv)
+        env = _wrap_frame_stack(cfg, _wrap_normalize(cfg, venv))
         try:
             model = cls(cfg.policy, env, seed=cfg.seed, policy_kwargs=_policy_kwargs(cfg) or None,
                         device="cpu", verbose=0, **_hyperparams(cfg))  # fmt: skip
@@ -594,7 +631,7 @@ def train(
         remaining = min(remaining, chunk_timesteps)
     if remaining:
         model.learn(remaining, callback=callbacks, reset_num_timesteps=False,
-                    log_interval=1 if cfg.algo in ("ppo", "a2c") else 10)  # fmt: skip
+                    log_interval=10 if cfg.algo in OFF_POLICY else 1)  # fmt: skip
     wall = time.perf_counter() - started
     steps = int(model.num_timesteps) - start
     final = validator.evaluate(model)
