@@ -10,6 +10,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import wsp_env  # noqa: F401  (registers WSPBraking-v0)
+from wsp_env import env_kernel as K
 from wsp_env.env import WSPBrakingEnv, WSPBrakingVectorEnv
 
 VEHICLES = ["uic_z1", "e402b", "etr1000", "regiolis"]
@@ -224,3 +225,56 @@ def test_bench_quick_writes_contract_keys(tmp_path):
         assert key in result
     assert result["vector_num_envs"] == 1024 and result["n_axles"] == 4
     assert result["single_env_steps_per_s"] > 0 and result["cartpole_vector_steps_per_s"] > 0
+
+
+def _locked_stop_reference_error(**kwargs):
+    """Largest |v_ref - V| (km/h) over a no-WSP soap stop (every wheel locks), and the env."""
+    venv = WSPBrakingVectorEnv(num_envs=1, vehicle="uic_z1", **kwargs)
+    opts = {"rail": "soap", "speed_kmh": 100.0, "pattern": "uniform", "gradient_permille": 0.0,
+            "mu_contaminated": 0.06}  # fmt: skip
+    venv.reset(seed=5, options=opts)
+    err = 0.0
+    for _ in range(5000):
+        _, _, term, trunc, _ = venv.step(np.ones((1, 4), dtype=np.float32))
+        if (term | trunc).any():
+            break
+        err = max(err, abs(venv.core.wsp[0, K.W_VREF] - venv.core.sim.speed_mps[0]) * 3.6)
+    return err, venv
+
+
+def test_accelerometer_keeps_the_reference_on_the_train_when_every_wheel_slides():
+    """Without it the reference of a locked-wheel stop falls at its 2.5 m/s^2 limit, far below
+    the train; with an accelerometer (no bias) it follows the train; the reading is the last
+    observation and the default observation is unchanged."""
+    plain, venv0 = _locked_stop_reference_error()
+    aided, venv1 = _locked_stop_reference_error(accelerometer=True, accelerometer_bias_mps2=0.0)
+    assert plain > 20.0 and aided < 0.5, (plain, aided)
+    assert venv1.core.obs_dim == venv0.core.obs_dim + 1 == 23
+
+
+def test_accelerometer_reads_specific_force_with_a_bias_drawn_per_episode():
+    """On a gradient it misses g sin(theta) (uphill reads less deceleration than the train
+    has); the bias is drawn within its bound, reproducibly, after the scenario (the scenario
+    draws are the same with and without the accelerometer)."""
+    opts = {"rail": "dry", "speed_kmh": 80.0, "pattern": "uniform", "gradient_permille": 20.0}
+    venv = WSPBrakingVectorEnv(num_envs=1, accelerometer=True, accelerometer_bias_mps2=0.0)
+    venv.reset(seed=1, options=opts)
+    for _ in range(300):
+        venv.step(np.ones((1, 4), dtype=np.float32))
+    v0 = venv.core.sim.speed_mps[0]
+    venv.step(np.ones((1, 4), dtype=np.float32))
+    true_decel = (v0 - venv.core.sim.speed_mps[0]) / 0.02
+    reading = venv.core.wsp[0, K.W_ACC]
+    assert reading == pytest.approx(true_decel - 9.80665 * 0.02, rel=1e-3, abs=2e-3)
+    assert venv.core.obs[0, -1] == pytest.approx(reading / 10.0, rel=1e-6)
+    biases = []
+    for acc in (True, False):
+        v = WSPBrakingVectorEnv(num_envs=8, accelerometer=acc, accelerometer_bias_mps2=0.05)
+        _, info = v.reset(seed=3)
+        biases.append(v.core.wsp[:, K.W_ACC_BIAS].copy())
+        if acc:
+            scen_acc = [dict(s) for s in info["scenario"]]
+        else:
+            assert [dict(s) for s in info["scenario"]] == scen_acc
+    assert np.all(np.abs(biases[0]) <= 0.05) and np.unique(biases[0]).size == 8
+    assert np.all(biases[1] == 0.0)

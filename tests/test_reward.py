@@ -92,3 +92,30 @@ def test_damage_is_superlinear_per_axle():
     spread = 4 * K.damage_cost(1e6, par)
     assert K.damage_cost(0.0, par) == 0.0
     assert one > 1.5 * spread > 0.0
+
+
+@pytest.mark.parametrize("gamma", [1.0, 0.999])
+def test_distance_shaping_telescopes_to_a_constant_of_the_scenario(gamma):
+    """Potential-based shaping (a training option): its discounted sum over a stop is exactly
+    -Phi(V0) = V0^2 / (2 a0) / scale, whatever the policy does — so it cannot change which
+    policy is best — and it is zero unless switched on."""
+    a0, scale = 1.5, 100.0
+    totals = {}
+    for shaped in (False, True):
+        reward = {"shaping_decel_mps2": a0 if shaped else 0.0, "shaping_gamma": gamma}
+        venv = WSPBrakingVectorEnv(num_envs=2, vehicle="uic_z1", reward=reward)
+        venv.reset(seed=[3, 4], options={"rail": "soap", "speed_kmh": 60.0, "pattern": "uniform"})
+        v0 = venv.core.sim.speed_mps.copy()
+        disc, total, done, t = np.zeros(2), np.zeros(2), np.zeros(2, dtype=bool), 0
+        rng = np.random.default_rng(0)
+        while not done.all():  # random valve commands: any policy
+            _, _, term, trunc, info = venv.step(rng.uniform(-1, 1, (2, 4)).astype(np.float32))
+            shaping = info["reward_terms"]["shaping"]
+            disc[~done] += gamma**t * shaping[~done]
+            total[~done] += shaping[~done]
+            done |= term | trunc
+            t += 1
+        totals[shaped] = (disc, total, v0)
+    assert np.all(totals[False][1] == 0.0)
+    disc, _, v0 = totals[True]
+    np.testing.assert_allclose(disc, v0**2 / (2 * a0) / scale, rtol=1e-9)

@@ -286,3 +286,13 @@ def test_stacked_and_recurrent_policies_evaluate_with_their_memory(tmp_path, cha
         assert policy.recurrent and memory is not None
     results, _ = run_suite("uic_z1", load_suite(str(tmp_path / "suite.yaml")), policy)
     assert len(results) == 2 and all(r["stopped"] for r in results)
+
+
+def test_shipped_training_configs_load():
+    from wsp_env.config import _configs_root
+
+    paths = sorted((_configs_root() / "train").glob("*.yaml"))
+    assert paths
+    for p in paths:
+        cfg = load_train_config(p)
+        assert cfg.eval.suite == "validation" and cfg.n_timesteps >= 1_000_000

@@ -18,7 +18,12 @@ slip against the reference speed ``(v_ref - v_i) / max(v_ref, 1 m/s)``, the cyli
 ``/ p_max``; then the demand ``/ p_max``, the reference speed ``/ v_s`` (fastest wheel, falling
 at most 2.5 m/s^2 — above any dry-rail deceleration, so it is the train speed on good adhesion),
 and the previous action. ``privileged=True`` appends the true train speed,
-each axle's friction level and true creepage.
+each axle's friction level and true creepage. ``accelerometer=True`` gives the WSP a body
+accelerometer, as accelerometer-aided WSPs have: the reference speed then falls at the
+deceleration it reads over each period — a specific force, so the gradient's ``g sin(theta)``
+is missing from it, plus a bias drawn per episode within ``+-accelerometer_bias_mps2``
+(0.05 m/s^2) — instead of the fixed limit, and the reading ``/ 10 m/s^2`` is appended to the
+observation. With it the reference follows the train when every wheel slides.
 
 **Reward** — minus the stop's cost in metres of stopping distance, divided by
 ``distance_scale_m`` (100 m); the terms, each in ``info["reward_terms"]``, and their exchange
@@ -30,7 +35,14 @@ rates (``reward``, ``RewardConfig``):
   (20 m per MJ, doubled at 1 MJ), so a slide concentrated on one wheel costs more than the same
   energy spread over four;
 * ``lock``      ``lock_m_per_s`` (10 m) per second each axle is locked (a wheel flat);
-* ``air``       ``air_m_per_100l`` (5 m) per 100 free-air litres vented.
+* ``air``       ``air_m_per_100l`` (5 m) per 100 free-air litres vented;
+* ``shaping``   a training option, off by default (``shaping_decel_mps2 = 0``): potential-based
+  shaping ``gamma Phi(V') - Phi(V)`` with ``Phi(V) = -V^2 / (2 a0)``, the distance the train
+  would still run at ``a0``, and ``gamma = shaping_gamma`` (set it to the learner's discount).
+  It pays now for the speed a harder brake takes off, which the distance term only pays as the
+  metres are not run, and by Ng, Harada & Russell (1999) leaves the optimal policy unchanged;
+  over an episode it sums to about ``V0^2 / (2 a0)``, a constant of the scenario. It reads the
+  true train speed: a reward-only privilege (observations are unchanged).
 
 With these defaults the classical WSP's return is about nine tenths distance; a locked-wheel
 policy (``none``) and one that brakes less than the demand return clearly less on soap and
@@ -88,6 +100,9 @@ class RewardConfig:
     damage_ref_MJ: float = field(default=1.0, metadata={"gt": 0.0})
     lock_m_per_s: float = field(default=10.0, metadata={"ge": 0.0})
     air_m_per_100l: float = field(default=5.0, metadata={"ge": 0.0})
+    # training option: potential-based distance shaping (module docstring); 0 = off
+    shaping_decel_mps2: float = field(default=0.0, metadata={"ge": 0.0})
+    shaping_gamma: float = field(default=0.999, metadata={"gt": 0.0, "le": 1.0})
 
     def vector(self) -> np.ndarray:
         v = np.zeros(K.N_RP)
@@ -96,10 +111,12 @@ class RewardConfig:
         v[K.RP_DAMAGE_REF_MJ] = self.damage_ref_MJ
         v[K.RP_LOCK_M_PER_S] = self.lock_m_per_s
         v[K.RP_AIR_M_PER_100L] = self.air_m_per_100l
+        v[K.RP_SHAPING_DECEL] = self.shaping_decel_mps2
+        v[K.RP_SHAPING_GAMMA] = self.shaping_gamma
         return v
 
 
-TERM_NAMES = ("distance", "damage", "lock", "air")
+TERM_NAMES = ("distance", "damage", "lock", "air", "shaping")
 
 
 @dataclass(frozen=True)
@@ -151,6 +168,8 @@ class _BrakingCore:
         action_mode: str = "continuous",
         valve_group: str | None = None,
         privileged: bool = False,
+        accelerometer: bool = False,
+        accelerometer_bias_mps2: float = 0.05,
         reward: RewardConfig | dict | None = None,
         scenario: ScenarioConfig | dict | None = None,
         rails_config: str | None = None,
@@ -185,7 +204,13 @@ class _BrakingCore:
         self.mode = K.MODE_CONTINUOUS if action_mode == "continuous" else K.MODE_DISCRETE
         self.action_mode = action_mode
         self.privileged = privileged
-        self.obs_dim = K.obs_size(self.n_axles, self.n_valves, privileged)
+        if not (np.isfinite(accelerometer_bias_mps2) and accelerometer_bias_mps2 >= 0.0):
+            raise ValueError(
+                f"accelerometer_bias_mps2: must be >= 0, got {accelerometer_bias_mps2!r}"
+            )
+        self.accelerometer = bool(accelerometer)
+        self.accelerometer_bias_mps2 = float(accelerometer_bias_mps2)
+        self.obs_dim = K.obs_size(self.n_axles, self.n_valves, privileged, self.accelerometer)
         self.obs = np.zeros((n_envs, self.obs_dim), dtype=np.float32)
         self.terms = np.zeros((n_envs, K.N_TERMS))
         self.flags = np.zeros((n_envs, K.N_F), dtype=np.int64)
@@ -199,6 +224,7 @@ class _BrakingCore:
         self.obs_par[K.OP_REF_RISE_LIMIT] = 0.5
         self.obs_par[K.OP_MAX_TIME] = max_time_s
         self.obs_par[K.OP_PRIVILEGED] = 1.0 if privileged else 0.0
+        self.obs_par[K.OP_ACCELEROMETER] = 1.0 if self.accelerometer else 0.0
         self.reward_par = self.reward.vector()
         self.rngs: list[np.random.Generator] = [np.random.default_rng() for _ in range(n_envs)]
         self.episode_return = np.zeros(n_envs)
@@ -265,6 +291,10 @@ class _BrakingCore:
         sim.configure(e, setup)
         sim.reset([e])
         sim.cmd[e] = 1.0
+        # drawn after the scenario, so switching the accelerometer on changes no scenario
+        bias = self.accelerometer_bias_mps2
+        drawn = self.rngs[e].uniform(-bias, bias) if self.accelerometer else 0.0
+        self.wsp[e, K.W_ACC_BIAS] = drawn
         K.reset_obs(
             e, sim.env_par, sim.axle_par, sim.env_state, sim.axle_state, self.wsp,
             self.prev_wheel, self.prev_action, self.obs_par, sim.control_period_s, self.obs,

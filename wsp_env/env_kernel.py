@@ -21,6 +21,7 @@ from wsp_env.physics.layout import (
     AS_OMEGA,
     AS_P,
     CMD_HOLD,
+    EP_GRADE_ACC,
     EP_P_MAX,
     ES_STOPPED,
     ES_T,
@@ -34,7 +35,11 @@ R_DISTANCE = 0  # -dx: sums to -stopping_distance
 R_DAMAGE = 1  # -(sum_i f(E_i)) increment, f(E) = m_per_MJ E (1 + E / E_ref), E_i per axle
 R_LOCK = 2  # -lock_m_per_s * (number of locked axles) * dt
 R_AIR = 3  # -air_m_per_100l * vented free-air litres / 100
-N_TERMS = 4
+# potential-based shaping (training option, off by default): gamma Phi(V') - Phi(V) with
+# Phi(V) = -V^2 / (2 a0), the distance still to run at a0; over an episode it sums to -Phi(V0)
+# (discounted: leaves the optimal policy unchanged, Ng, Harada & Russell 1999)
+R_SHAPING = 4
+N_TERMS = 5
 
 # reward parameters (``reward_par``)
 RP_DISTANCE_SCALE = 0  # m: every term is divided by it
@@ -42,7 +47,9 @@ RP_DAMAGE_M_PER_MJ = 1  # m of stopping distance per MJ of sliding energy on one
 RP_DAMAGE_REF_MJ = 2  # MJ per axle at which the damage cost has doubled (superlinear part)
 RP_LOCK_M_PER_S = 3  # m per second one axle is locked
 RP_AIR_M_PER_100L = 4  # m per 100 free-air litres vented
-N_RP = 5
+RP_SHAPING_DECEL = 5  # m/s^2: a0 of the shaping potential; 0 = no shaping
+RP_SHAPING_GAMMA = 6  # the discount the shaping is written for (the learner's)
+N_RP = 7
 
 # observation parameters (``obs_par``)
 OP_SPEED_SCALE = 0  # m/s
@@ -51,11 +58,14 @@ OP_REF_DECEL_LIMIT = 2  # m/s^2: the reference speed may fall at most this fast
 OP_REF_RISE_LIMIT = 3  # m/s^2: ... and rise at most this fast
 OP_MAX_TIME = 4  # s: truncation
 OP_PRIVILEGED = 5  # 1.0: append true speed, friction level and true creepage
-N_OP = 6
+OP_ACCELEROMETER = 6  # 1.0: a body accelerometer aids the reference speed and is observed
+N_OP = 7
 
 # per-env WSP-side state (``wsp``)
 W_VREF = 0  # m/s, reference speed estimate
-N_W = 1
+W_ACC = 1  # m/s^2, the accelerometer's deceleration reading over the last period
+W_ACC_BIAS = 2  # m/s^2, its bias (drawn per episode)
+N_W = 3
 
 OBS_CLIP = 5.0
 MODE_CONTINUOUS = 0
@@ -69,9 +79,10 @@ F_NAN = 3
 N_F = 4
 
 
-def obs_size(n_axles: int, n_valves: int, privileged: bool) -> int:
+def obs_size(n_axles: int, n_valves: int, privileged: bool, accelerometer: bool = False) -> int:
     """Length of one observation (see ``write_obs``)."""
-    return 4 * n_axles + 2 + n_valves + ((1 + 2 * n_axles) if privileged else 0)
+    extra = (1 + 2 * n_axles) if privileged else 0
+    return 4 * n_axles + 2 + n_valves + extra + (1 if accelerometer else 0)
 
 
 @njit(**INLINE_FLAGS)
@@ -94,8 +105,9 @@ def write_obs(
     """Observation of env ``e``: what a WSP measures, normalised to about [-1, 1].
 
     ``[v_axle_i / v_s]``, ``[axle deceleration_i / a_s]``, ``[(v_ref - v_axle_i) / max(v_ref, 1)]``,
-    ``[p_i / p_max]``, ``p_demand / p_max``, ``v_ref / v_s``, ``[previous action]``, and with
-    ``privileged``: ``V / v_s``, ``[friction level_i]``, ``[(V - v_axle_i) / max(V, 1)]``.
+    ``[p_i / p_max]``, ``p_demand / p_max``, ``v_ref / v_s``, ``[previous action]``, with
+    ``privileged``: ``V / v_s``, ``[friction level_i]``, ``[(V - v_axle_i) / max(V, 1)]``, and
+    with ``accelerometer`` last: the body accelerometer's deceleration reading ``/ a_s``.
     """
     n_axles = axle_par.shape[1]
     n_valves = prev_action.shape[1]
@@ -124,6 +136,8 @@ def write_obs(
             wheel = axle_state[e, k, AS_OMEGA] * axle_par[e, k, AP_RADIUS]
             obs[e, base + 1 + k] = axle_state[e, k, AS_MU_LEVEL]
             obs[e, base + 1 + n_axles + k] = _clip((v - wheel) * inv_v)
+    if obs_par[OP_ACCELEROMETER] > 0.0:
+        obs[e, obs.shape[1] - 1] = _clip(wsp[e, W_ACC] / a_s)
 
 
 @njit(**KERNEL_FLAGS)
@@ -132,6 +146,7 @@ def reset_obs(
 ):
     """Reset the WSP-side state of env ``e`` after ``TrainSim.reset`` and write its observation."""
     wsp[e, W_VREF] = env_state[e, ES_V]
+    wsp[e, W_ACC] = 0.0  # the bias (W_ACC_BIAS) is drawn by the caller
     for k in range(axle_par.shape[1]):
         prev_wheel[e, k] = axle_state[e, k, AS_OMEGA] * axle_par[e, k, AP_RADIUS]
     for j in range(prev_action.shape[1]):
@@ -206,6 +221,7 @@ def _env_step_one(
     flags[e, F_CLIPPED] = clipped
     flags[e, F_NAN] = bad
     x0 = env_state[e, ES_X]
+    v0 = env_state[e, ES_V]
     damage0 = 0.0
     air0 = 0.0
     for k in range(n_axles):
@@ -226,12 +242,20 @@ def _env_step_one(
         env_acc,
         axle_acc,
     )
-    # --- WSP reference speed: the fastest wheel, falling at most at the deceleration limit ------
+    # --- WSP reference speed: the fastest wheel, falling at most at the deceleration limit, or
+    # with a body accelerometer at the deceleration it reads (specific force: the gradient's
+    # g sin(theta) is not seen, plus the sensor's bias), as accelerometer-aided WSPs do --------
     v_ref = wsp[e, W_VREF]
     fastest = 0.0
     for k in range(n_axles):
         fastest = max(fastest, axle_state[e, k, AS_OMEGA] * axle_par[e, k, AP_RADIUS])
-    v_ref = max(fastest, v_ref - obs_par[OP_REF_DECEL_LIMIT] * ctrl_dt)
+    if obs_par[OP_ACCELEROMETER] > 0.0:
+        a_read = (v0 - env_state[e, ES_V]) / ctrl_dt - env_par[e, EP_GRADE_ACC]
+        a_read += wsp[e, W_ACC_BIAS]
+        wsp[e, W_ACC] = a_read
+        v_ref = max(fastest, v_ref - max(a_read, 0.0) * ctrl_dt)
+    else:
+        v_ref = max(fastest, v_ref - obs_par[OP_REF_DECEL_LIMIT] * ctrl_dt)
     v_ref = min(v_ref, wsp[e, W_VREF] + obs_par[OP_REF_RISE_LIMIT] * ctrl_dt)
     wsp[e, W_VREF] = v_ref
     # --- reward terms (costs in metres of stopping distance) -------------------------------------
@@ -249,6 +273,13 @@ def _env_step_one(
     terms[e, R_DAMAGE] = -(damage1 - damage0) * inv_scale
     terms[e, R_LOCK] = -reward_par[RP_LOCK_M_PER_S] * locked * ctrl_dt * inv_scale
     terms[e, R_AIR] = -reward_par[RP_AIR_M_PER_100L] * (air1 - air0) * 0.01 * inv_scale
+    a0 = reward_par[RP_SHAPING_DECEL]
+    if a0 > 0.0:
+        phi0 = -v0 * v0 / (2.0 * a0)
+        phi1 = -v * v / (2.0 * a0) if env_state[e, ES_STOPPED] == 0.0 else 0.0
+        terms[e, R_SHAPING] = (reward_par[RP_SHAPING_GAMMA] * phi1 - phi0) * inv_scale
+    else:
+        terms[e, R_SHAPING] = 0.0
     flags[e, F_TERMINATED] = 1 if env_state[e, ES_STOPPED] > 0.0 else 0
     flags[e, F_TRUNCATED] = (
         1 if flags[e, F_TERMINATED] == 0 and env_state[e, ES_T] >= obs_par[OP_MAX_TIME] else 0

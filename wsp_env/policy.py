@@ -50,13 +50,13 @@ class SB3Policy:
     (what ``wsp-env train`` writes beside every model and checkpoint), else SB3's checkpoint
     naming ``*_vecnormalize_N_steps.pkl``, else ``vecnormalize.pkl`` in the model's folder or
     the run folder above it — and the environment settings it was trained with
-    (``config.yaml`` of its run: action mode, valve grouping, privileged observations, control
-    period), which the evaluation then uses (``env_kwargs``). A discrete-action model's valve
-    modes (0 vent, 1 hold, 2 fill) therefore reach a discrete-mode environment, never read as
-    continuous commands. Frame-stacked policies (``frame_stack`` in the run's config) get the
-    stack built as ``VecFrameStack`` builds it (normalised frames, newest last, zeros at an
-    episode's start); recurrent ones (RecurrentPPO) carry their LSTM state from step to step,
-    reset with each episode.
+    (``config.yaml`` of its run: action mode, valve grouping, privileged observations,
+    accelerometer, control period), which the evaluation then uses (``env_kwargs``). A
+    discrete-action model's valve modes (0 vent, 1 hold, 2 fill) therefore reach a
+    discrete-mode environment, never read as continuous commands. Frame-stacked policies
+    (``frame_stack`` in the run's config) get the stack built as ``VecFrameStack`` builds it
+    (normalised frames, newest last, zeros at an episode's start); recurrent ones
+    (RecurrentPPO) carry their LSTM state from step to step, reset with each episode.
     """
 
     privileged = False
@@ -172,7 +172,10 @@ class SB3Policy:
 
 
 # the environment settings a trained model needs in evaluation (its spaces and timing)
-POLICY_ENV_KWARGS = ("action_mode", "valve_group", "privileged", "control_period_s")
+POLICY_ENV_KWARGS = (
+    "action_mode", "valve_group", "privileged", "accelerometer", "accelerometer_bias_mps2",
+    "control_period_s",
+)  # fmt: skip
 
 
 def _run_config(model_path: Path) -> dict[str, Any] | None:

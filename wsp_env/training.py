@@ -64,12 +64,13 @@ POLICY_KWARGS = (
 # keyword arguments of the algorithm that the trainer sets itself
 MANAGED = ("policy", "env", "seed", "policy_kwargs", "tensorboard_log", "verbose", "device")
 ENV_KWARGS = (
-    "vehicle", "action_mode", "valve_group", "privileged", "reward", "scenario", "rails_config",
-    "control_period_s", "substep_s", "max_time_s",
+    "vehicle", "action_mode", "valve_group", "privileged", "accelerometer",
+    "accelerometer_bias_mps2", "reward", "scenario", "rails_config", "control_period_s",
+    "substep_s", "max_time_s",
 )  # fmt: skip
-POLICY_ENV_KWARGS = ("action_mode", "valve_group", "privileged", "control_period_s")
 SCHEDULE = re.compile(r"^lin_([0-9.eE+-]+)$")
 CONFIG_NAME = "config.yaml"
+KEEP_CHECKPOINTS = 3  # the newest ones; the best model is kept apart (best_model.zip)
 
 
 # ---- config ---------------------------------------------------------------------------------
@@ -375,6 +376,11 @@ def _save_checkpoint(model: Any, cfg: TrainConfig, folder: Path) -> None:
         pickle.dump(state, fh)
     shutil.rmtree(folder, ignore_errors=True)
     tmp.rename(folder)
+    older = sorted(
+        (int(p.name[5:]), p) for p in folder.parent.glob("step_*") if p.name[5:].isdigit()
+    )
+    for _, p in older[:-KEEP_CHECKPOINTS]:  # an off-policy replay buffer is large
+        shutil.rmtree(p, ignore_errors=True)
 
 
 def _stacked(env: Any) -> np.ndarray | None:
