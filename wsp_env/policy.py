@@ -85,7 +85,7 @@ class SB3Policy:
             except Exception:
                 continue
         if model is None:
-            raise ValueError(f"{p}: not a stable-baselines3 model file (PPO, SAC, TD3 or A2C)")
+            raise ValueError(f"{p}: not a stable-baselines3 model file ({', '.join(classes)})")
         env_kwargs = (config or {}).get("env_kwargs", {}) or {}
         n_stack = int((config or {}).get("frame_stack", 1) or 1)
         # a run folder's models share stems (best_model, model): the folder tells them apart
