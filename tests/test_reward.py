@@ -119,3 +119,20 @@ def test_distance_shaping_telescopes_to_a_constant_of_the_scenario(gamma):
     assert np.all(totals[False][1] == 0.0)
     disc, _, v0 = totals[True]
     np.testing.assert_allclose(disc, v0**2 / (2 * a0) / scale, rtol=1e-9)
+
+
+def test_slide_time_term_prices_the_judged_slide_time():
+    """The optional ``slide`` term sums to -slide_m_per_s x (axle-seconds sliding deeper than
+    the slide threshold) / scale: the same time the metrics report per axle; zero when off."""
+    for rate in (0.0, 4.0):
+        venv = WSPBrakingVectorEnv(num_envs=1, vehicle="uic_z1", reward={"slide_m_per_s": rate})
+        venv.reset(seed=2, options={"rail": "soap", "speed_kmh": 60.0, "pattern": "uniform"})
+        total = 0.0
+        while True:
+            _, _, term, trunc, info = venv.step(np.ones((1, 4), dtype=np.float32))  # locks
+            total += float(info["reward_terms"]["slide"][0])
+            if term[0] or trunc[0]:
+                slide_s = sum(a["slide_time_s"] for a in info["final_info"][0]["metrics"]["axles"])
+                break
+        assert slide_s > 10.0
+        assert total == pytest.approx(-rate * slide_s / 100.0, rel=1e-9, abs=1e-12)

@@ -42,7 +42,10 @@ rates (``reward``, ``RewardConfig``):
   It pays now for the speed a harder brake takes off, which the distance term only pays as the
   metres are not run, and by Ng, Harada & Russell (1999) leaves the optimal policy unchanged;
   over an episode it sums to about ``V0^2 / (2 a0)``, a constant of the scenario. It reads the
-  true train speed: a reward-only privilege (observations are unchanged).
+  true train speed: a reward-only privilege (observations are unchanged);
+* ``slide``     an option, off by default (``slide_m_per_s = 0``): metres per second each axle
+  slides deeper than the slide threshold ``max(3 km/h, 20 % V)`` — the time the damage
+  criterion "longest slide" judges, which the sliding energy alone does not price.
 
 With these defaults the classical WSP's return is about nine tenths distance; a locked-wheel
 policy (``none``) and one that brakes less than the demand return clearly less on soap and
@@ -103,6 +106,8 @@ class RewardConfig:
     # training option: potential-based distance shaping (module docstring); 0 = off
     shaping_decel_mps2: float = field(default=0.0, metadata={"ge": 0.0})
     shaping_gamma: float = field(default=0.999, metadata={"gt": 0.0, "le": 1.0})
+    # option: price the time an axle slides deeper than the slide threshold; 0 = off
+    slide_m_per_s: float = field(default=0.0, metadata={"ge": 0.0})
 
     def vector(self) -> np.ndarray:
         v = np.zeros(K.N_RP)
@@ -113,10 +118,11 @@ class RewardConfig:
         v[K.RP_AIR_M_PER_100L] = self.air_m_per_100l
         v[K.RP_SHAPING_DECEL] = self.shaping_decel_mps2
         v[K.RP_SHAPING_GAMMA] = self.shaping_gamma
+        v[K.RP_SLIDE_M_PER_S] = self.slide_m_per_s
         return v
 
 
-TERM_NAMES = ("distance", "damage", "lock", "air", "shaping")
+TERM_NAMES = ("distance", "damage", "lock", "air", "shaping", "slide")
 
 
 @dataclass(frozen=True)

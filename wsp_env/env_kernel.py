@@ -15,6 +15,7 @@ from wsp_env.physics.integrator import INLINE_FLAGS, KERNEL_FLAGS, _step_env, is
 from wsp_env.physics.layout import (
     AA_AIR_L,
     AA_SLIDE_E,
+    AA_SLIDE_T,
     AP_RADIUS,
     AS_CMD,
     AS_MU_LEVEL,
@@ -39,7 +40,10 @@ R_AIR = 3  # -air_m_per_100l * vented free-air litres / 100
 # Phi(V) = -V^2 / (2 a0), the distance still to run at a0; over an episode it sums to -Phi(V0)
 # (discounted: leaves the optimal policy unchanged, Ng, Harada & Russell 1999)
 R_SHAPING = 4
-N_TERMS = 5
+# -slide_m_per_s * (axle-seconds sliding deeper than the slide threshold): the time the damage
+# criterion "longest slide" judges (off by default)
+R_SLIDE = 5
+N_TERMS = 6
 
 # reward parameters (``reward_par``)
 RP_DISTANCE_SCALE = 0  # m: every term is divided by it
@@ -49,7 +53,8 @@ RP_LOCK_M_PER_S = 3  # m per second one axle is locked
 RP_AIR_M_PER_100L = 4  # m per 100 free-air litres vented
 RP_SHAPING_DECEL = 5  # m/s^2: a0 of the shaping potential; 0 = no shaping
 RP_SHAPING_GAMMA = 6  # the discount the shaping is written for (the learner's)
-N_RP = 7
+RP_SLIDE_M_PER_S = 7  # m per second one axle slides deeper than the slide threshold
+N_RP = 8
 
 # observation parameters (``obs_par``)
 OP_SPEED_SCALE = 0  # m/s
@@ -224,10 +229,12 @@ def _env_step_one(
     v0 = env_state[e, ES_V]
     damage0 = 0.0
     air0 = 0.0
+    slide0 = 0.0
     for k in range(n_axles):
         prev_wheel[e, k] = axle_state[e, k, AS_OMEGA] * axle_par[e, k, AP_RADIUS]
         damage0 += damage_cost(axle_acc[e, k, AA_SLIDE_E], reward_par)
         air0 += axle_acc[e, k, AA_AIR_L]
+        slide0 += axle_acc[e, k, AA_SLIDE_T]
     _step_env(
         e,
         n_sub,
@@ -263,16 +270,19 @@ def _env_step_one(
     locked = 0.0
     damage1 = 0.0
     air1 = 0.0
+    slide1 = 0.0
     for k in range(n_axles):
         if is_locked(axle_state[e, k, AS_OMEGA] * axle_par[e, k, AP_RADIUS], v):
             locked += 1.0
         damage1 += damage_cost(axle_acc[e, k, AA_SLIDE_E], reward_par)
         air1 += axle_acc[e, k, AA_AIR_L]
+        slide1 += axle_acc[e, k, AA_SLIDE_T]
     inv_scale = 1.0 / reward_par[RP_DISTANCE_SCALE]
     terms[e, R_DISTANCE] = -(env_state[e, ES_X] - x0) * inv_scale
     terms[e, R_DAMAGE] = -(damage1 - damage0) * inv_scale
     terms[e, R_LOCK] = -reward_par[RP_LOCK_M_PER_S] * locked * ctrl_dt * inv_scale
     terms[e, R_AIR] = -reward_par[RP_AIR_M_PER_100L] * (air1 - air0) * 0.01 * inv_scale
+    terms[e, R_SLIDE] = -reward_par[RP_SLIDE_M_PER_S] * (slide1 - slide0) * inv_scale
     a0 = reward_par[RP_SHAPING_DECEL]
     if a0 > 0.0:
         phi0 = -v0 * v0 / (2.0 * a0)
