@@ -224,6 +224,15 @@ def test_discrete_models_are_evaluated_in_discrete_mode(tmp_path):
         ({"env_kwargs": {"vehicle": "tgv"}}, "env_kwargs"),
         ({"env_kwargs": {"scenario": {"rails": {"ice": 1.0}}}}, "env_kwargs.scenario.rails.ice"),
         ({"eval": {"suite": "heldout"}}, "eval.suite"),
+        ({"eval": {"suite": "en15595"}}, "eval.suite"),
+        ({"eval": {"suite": "no_such_suite"}}, "eval.suite"),
+        ({"gamma": "0.99"}, "gamma"),
+        ({"batch_size": True}, "batch_size"),
+        ({"n_epochs": "lin_3"}, "n_epochs"),
+        (
+            {"env_kwargs": {"reward": {"shaping_decel_mps2": 1.0, "shaping_gamma": 0.99}}},
+            "env_kwargs.reward.shaping_gamma",
+        ),
     ],
 )
 def test_bad_config_is_one_line_naming_file_and_field(tmp_path, capsys, changes, field):
@@ -274,16 +283,22 @@ def test_stacked_and_recurrent_policies_evaluate_with_their_memory(tmp_path, cha
     policy = make_policy(str(out / "model.zip"))
     core = _BrakingCore(2)
     policy.bind(core)
+
+    def memory():
+        if policy.n_stack > 1:
+            return policy._stack.copy()
+        return np.concatenate([np.asarray(t).ravel() for t in policy._state])  # LSTM (h, c)
+
     policy.reset(np.arange(2))
     first = policy.act(core.obs)
+    after_one = memory()
     policy.act(core.obs)
-    memory = policy._stack.copy() if policy.n_stack > 1 else policy._state
+    after_two = memory()
+    assert not np.array_equal(after_one, after_two)  # the memory moves with each step
     policy.reset(np.arange(2))
-    np.testing.assert_array_equal(policy.act(core.obs), first)
-    if policy.n_stack > 1:
-        assert policy._stack.shape == (2, 3 * core.obs_dim) and np.abs(memory).sum() > 0
-    else:
-        assert policy.recurrent and memory is not None
+    np.testing.assert_array_equal(policy.act(core.obs), first)  # and restarts per episode
+    np.testing.assert_array_equal(memory(), after_one)
+    assert policy.recurrent or policy._stack.shape == (2, 3 * core.obs_dim)
     results, _ = run_suite("uic_z1", load_suite(str(tmp_path / "suite.yaml")), policy)
     assert len(results) == 2 and all(r["stopped"] for r in results)
 
@@ -296,3 +311,24 @@ def test_shipped_training_configs_load():
     for p in paths:
         cfg = load_train_config(p)
         assert cfg.eval.suite == "validation" and cfg.n_timesteps >= 1_000_000
+
+
+def test_a_run_failing_before_its_first_checkpoint_leaves_no_folder(tmp_path, monkeypatch):
+    """Otherwise it could neither be started again in place nor resumed."""
+    from wsp_env import training
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("broken on purpose")
+
+    monkeypatch.setattr(training, "_merge_progress", broken)  # fails at the very end
+    out = tmp_path / "run"
+    monkeypatch.setattr(training, "_save_checkpoint", broken)
+    with pytest.raises(RuntimeError):
+        training.train(_config(tmp_path, n_timesteps=64), out, progress=False)
+    assert not out.exists()
+
+
+def test_resume_refuses_a_second_config(ppo_run, capsys):
+    _, tmp, out = ppo_run
+    assert main(["train", "--resume", str(out), "--config", str(_config(tmp))]) == 2
+    assert "--config" in capsys.readouterr().err

@@ -401,6 +401,8 @@ def cmd_train(args: argparse.Namespace) -> dict[str, Any]:
         raise UserError("--total-timesteps: must be >= 1")
     if args.chunk_timesteps is not None and args.chunk_timesteps < 1:
         raise UserError("--chunk-timesteps: must be >= 1")
+    if args.config is not None and args.resume is not None:
+        raise UserError("--config: a resumed run keeps its own config.yaml (drop --config)")
     if args.seed is not None and args.resume is not None:
         raise UserError("--seed: a resumed run keeps its own seed")
     return train(

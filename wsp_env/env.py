@@ -40,8 +40,10 @@ rates (``reward``, ``RewardConfig``):
   shaping ``gamma Phi(V') - Phi(V)`` with ``Phi(V) = -V^2 / (2 a0)``, the distance the train
   would still run at ``a0``, and ``gamma = shaping_gamma`` (set it to the learner's discount).
   It pays now for the speed a harder brake takes off, which the distance term only pays as the
-  metres are not run, and by Ng, Harada & Russell (1999) leaves the optimal policy unchanged;
-  over an episode it sums to about ``V0^2 / (2 a0)``, a constant of the scenario. It reads the
+  metres are not run, and by Ng, Harada & Russell (1999) leaves the optimal policy unchanged:
+  its *discounted* sum over a stop is exactly ``V0^2 / (2 a0)``, a constant of the scenario
+  (the undiscounted sum is not: with gamma < 1 it grows with the stop's length, so logged
+  episode returns with shaping on are not comparable with returns without it). It reads the
   true train speed: a reward-only privilege (observations are unchanged);
 * ``slide``     an option, off by default (``slide_m_per_s = 0``): metres per second each axle
   slides deeper than the slide threshold ``max(3 km/h, 20 % V)`` — the time the damage
@@ -297,7 +299,8 @@ class _BrakingCore:
         sim.configure(e, setup)
         sim.reset([e])
         sim.cmd[e] = 1.0
-        # drawn after the scenario, so switching the accelerometer on changes no scenario
+        # drawn after the scenario: the first scenario after seeding is the same with or without
+        # the accelerometer (later autoreset draws differ: the bias advanced the generator)
         bias = self.accelerometer_bias_mps2
         drawn = self.rngs[e].uniform(-bias, bias) if self.accelerometer else 0.0
         self.wsp[e, K.W_ACC_BIAS] = drawn

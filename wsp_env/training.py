@@ -70,6 +70,7 @@ ENV_KWARGS = (
 )  # fmt: skip
 SCHEDULE = re.compile(r"^lin_([0-9.eE+-]+)$")
 CONFIG_NAME = "config.yaml"
+JUDGING_SUITES = ("heldout", "en15595")  # never used for model selection
 KEEP_CHECKPOINTS = 3  # the newest ones; the best model is kept apart (best_model.zip)
 
 
@@ -254,19 +255,53 @@ def parse_train_config(data: Any, source: str = "") -> TrainConfig:
             raise ConfigError(f"env_kwargs.{k}: unknown (allowed: {', '.join(ENV_KWARGS)})")
     eval_cfg = from_dict(EvalConfig, data.pop("eval", {}) or {}, "eval")
     every = _int(data.pop("checkpoint_every_timesteps", 1_000_000), "checkpoint_every_timesteps")
-    cls = _algo_class(algo)
-    allowed = set(inspect.signature(cls.__init__).parameters) - {"self", *MANAGED}
+    try:
+        cls = _algo_class(algo)
+    except ImportError as err:
+        raise ConfigError(f"algo: {algo} needs a package that is not installed ({err})") from None
+    params = inspect.signature(cls.__init__).parameters
+    allowed = set(params) - {"self", *MANAGED}
     hyper = {}
     for k, v in data.items():
         if k not in allowed:
             raise ConfigError(f"{k}: unknown field (neither a trainer field nor a {algo} "
                               f"hyperparameter)")  # fmt: skip
-        parse_schedule(v, k)  # a malformed schedule is a config error now, not at training
+        _check_hyperparameter(k, v, params[k].default)
         hyper[k] = v
     cfg = TrainConfig(algo, n_timesteps, policy, n_envs, frame_stack, seed, normalize,
                       policy_kwargs, hyper, env_kwargs, eval_cfg, every, source)  # fmt: skip
     check_env_kwargs(cfg.env_kwargs)
+    reward = cfg.env_kwargs.get("reward") or {}
+    if isinstance(reward, dict) and float(reward.get("shaping_decel_mps2", 0.0) or 0.0) > 0.0:
+        gamma = float(hyper.get("gamma", params["gamma"].default))
+        shaping_gamma = float(reward.get("shaping_gamma", 0.999))
+        if abs(gamma - shaping_gamma) > 1e-12:
+            raise ConfigError(
+                f"env_kwargs.reward.shaping_gamma: {shaping_gamma} differs from the learner's "
+                f"gamma {gamma} (the shaping leaves the best policy unchanged only at the "
+                "learner's discount)"
+            )
     return cfg
+
+
+SCHEDULABLE = ("learning_rate", "clip_range", "clip_range_vf")
+
+
+def _check_hyperparameter(name: str, value: Any, default: Any) -> None:
+    """Types that SB3 would only trip over inside ``learn``: numbers where the default is a
+    number (a ``lin_X`` schedule where SB3 takes one), true/false where it is a flag."""
+    if isinstance(value, str) and value.startswith("lin_"):
+        if name not in SCHEDULABLE:
+            raise ConfigError(f"{name}: a schedule ({value!r}) is not allowed here")
+        parse_schedule(value, name)
+        return
+    if isinstance(default, bool):
+        if not isinstance(value, bool):
+            raise ConfigError(f"{name}: expected true or false, got {value!r}")
+    elif isinstance(default, int | float) and default is not None:
+        number = isinstance(value, int | float) and not isinstance(value, bool)
+        if not number or not math.isfinite(float(value)):
+            raise ConfigError(f"{name}: expected a number, got {value!r}")
 
 
 def _is_net_arch(v: Any) -> bool:
@@ -369,6 +404,8 @@ def _save_checkpoint(model: Any, cfg: TrainConfig, folder: Path) -> None:
         "stacked_obs": _stacked(model.get_env()),
         # RecurrentPPO keeps its rollout's LSTM state out of the model file
         "lstm_states": getattr(model, "_last_lstm_states", None),
+        # off-policy algorithms sample random actions from it before learning_starts
+        "action_space_rng": model.action_space.np_random.bit_generator.state,
         "num_timesteps": model.num_timesteps,
         "run_total_timesteps": model.run_total_timesteps,
     }
@@ -480,12 +517,20 @@ class Validator:
     """The periodic model selection: the current policy and the frozen classical WSP on the
     validation suite, one code path (``evaluation.run_suite``); keeps the best model."""
 
-    def __init__(self, cfg: TrainConfig, out: Path) -> None:
+    def __init__(self, cfg: TrainConfig, out: Path, resume_step: int = 0) -> None:
         from wsp_env.evaluation import load_suite, run_suite
         from wsp_env.policy import make_policy
 
         self.cfg, self.out = cfg, out
-        self.suite = load_suite(cfg.eval.suite)
+        try:
+            self.suite = load_suite(cfg.eval.suite)
+        except ConfigError as err:
+            raise ConfigError(f"{cfg.source}: eval.suite: {err}") from None
+        if self.suite.name in JUDGING_SUITES:
+            raise ConfigError(
+                f"{cfg.source}: eval.suite: {self.suite.name} judges controllers; selecting "
+                "models on it would reward tuning on the judge (use validation)"
+            )
         self.vehicle = cfg.env_kwargs.get("vehicle", "uic_z1")
         self.env_kwargs = {k: v for k, v in cfg.env_kwargs.items()
                            if k in ("reward", "rails_config", "substep_s")}  # fmt: skip
@@ -495,9 +540,10 @@ class Validator:
         self.history: list[dict[str, Any]] = []
         self.best: dict[str, Any] | None = None
         hist = out / "validation.json"
-        if hist.exists():  # a resumed run keeps its history and best
+        if hist.exists():  # a resumed run keeps its history up to where it resumes
             saved = json.loads(hist.read_text())
-            self.history, self.best = saved["history"], saved["best"]
+            self.history = [h for h in saved["history"] if h["timesteps"] <= resume_step]
+            self.best = max(self.history, key=_rank) if self.history else None
 
     def evaluate(self, model: Any, logger: Any = None) -> dict[str, Any]:
         from wsp_env.evaluation import run_suite
@@ -541,12 +587,13 @@ def summarise_validation(results: list[dict[str, Any]]) -> dict[str, Any]:
     }
 
 
-def _better(a: dict[str, Any], b: dict[str, Any]) -> bool:
+def _rank(row: dict[str, Any]) -> tuple[int, float]:
     """More runs passing the criteria, then the shorter mean stop."""
-    return (a["passed"], -a["mean_stopping_distance_m"]) > (
-        b["passed"],
-        -b["mean_stopping_distance_m"],
-    )
+    return (row["passed"], -row["mean_stopping_distance_m"])
+
+
+def _better(a: dict[str, Any], b: dict[str, Any]) -> bool:
+    return _rank(a) > _rank(b)
 
 
 def train(
@@ -578,11 +625,8 @@ def train(
         if ckpt is None:
             raise ConfigError(f"{resume}: no checkpoint to resume from (checkpoints/step_N)")
         cfg = parse_train_config(read_yaml(resume / CONFIG_NAME), str(resume / CONFIG_NAME))
-        if out.resolve() != resume.resolve():
-            if out.exists() and any(out.iterdir()):
-                raise ConfigError(f"{out}: exists and is not empty; not overwriting")
-            shutil.copytree(resume, out, dirs_exist_ok=True)
-            ckpt = out / "checkpoints" / ckpt.name
+        if out.resolve() != resume.resolve() and out.exists() and any(out.iterdir()):
+            raise ConfigError(f"{out}: exists and is not empty; not overwriting")
     else:
         if config is None:
             raise ConfigError("--config: required unless --resume")
@@ -610,9 +654,6 @@ def train(
             model.load_replay_buffer(ckpt / "replay_buffer.pkl")
         if state.get("lstm_states") is not None:
             model._last_lstm_states = state["lstm_states"]
-        torch.set_rng_state(state["torch_rng"])
-        np.random.set_state(state["numpy_rng"])  # noqa: NPY002 (SB3 draws from numpy's global)
-        random.setstate(state["python_rng"])
         start = int(model.num_timesteps)
         total = int(total_timesteps or state["run_total_timesteps"])
     else:
@@ -625,46 +666,66 @@ def train(
             raise ConfigError(f"{cfg.source}: {cfg.algo} hyperparameters: {err}") from None
         start = 0
     model.run_total_timesteps = total
-    validator = Validator(cfg, out)  # checks the validation suite before anything is written
+    # the validation suite is checked (and the classical WSP run on it) before anything is
+    # written; a resumed run's history is read from the folder it resumes
+    validator = Validator(cfg, resume if resume is not None else out, resume_step=start)
+    validator.out = out
     if resume is None:
         out.mkdir(parents=True, exist_ok=True)
         (out / CONFIG_NAME).write_text(yaml.safe_dump(cfg.as_yaml_dict(), sort_keys=False))
-    formats = ["csv"] + (["tensorboard"] if _have_tensorboard() else [])
-    model.set_logger(configure(str(out / "logs" / f"from_step_{start}"), formats))
-    callbacks = _Callbacks.make(cfg, out, total, progress, {"start": start, "validator": validator})
-    remaining = max(total - start, 0)
-    if chunk_timesteps is not None:
-        remaining = min(remaining, chunk_timesteps)
-    if remaining:
-        model.learn(remaining, callback=callbacks, reset_num_timesteps=False,
-                    log_interval=10 if cfg.algo in OFF_POLICY else 1)  # fmt: skip
-    wall = time.perf_counter() - started
-    steps = int(model.num_timesteps) - start
-    final = validator.evaluate(model)
-    save_policy_files(model, out / "model")
-    _save_checkpoint(model, cfg, out / "checkpoints" / f"step_{model.num_timesteps}")
-    _merge_progress(out)
-    result = {
-        "model_path": str(out / "best_model.zip"),
-        "final_model_path": str(out / "model.zip"),
-        "algo": cfg.algo,
-        "total_timesteps": int(model.num_timesteps),
-        "run_total_timesteps": total,
-        "finished": int(model.num_timesteps) >= total,
-        "timesteps_this_call": steps,
-        "wall_time_s": wall,
-        "env_steps_per_s": steps / wall if wall > 0 else 0.0,
-        "seed": cfg.seed,
-        "resumed_from": start if resume is not None else None,
-        "best_validation": validator.best,
-        "final_validation": final,
-        "classical_validation": validator.classical,
-        "validation_suite": validator.suite.name,
-    }
-    from wsp_env.cli import write_json
+    elif out.resolve() != resume.resolve():
+        shutil.copytree(resume, out, dirs_exist_ok=True)
+    if resume is not None:  # last: nothing above may draw from what the run draws from
+        torch.set_rng_state(state["torch_rng"])
+        np.random.set_state(state["numpy_rng"])  # noqa: NPY002 (SB3 draws from numpy's global)
+        random.setstate(state["python_rng"])
+        if state.get("action_space_rng") is not None:
+            model.action_space.np_random.bit_generator.state = state["action_space_rng"]
+    try:
+        formats = ["csv"] + (["tensorboard"] if _have_tensorboard() else [])
+        model.set_logger(configure(str(out / "logs" / f"from_step_{start}"), formats))
+        callbacks = _Callbacks.make(
+            cfg, out, total, progress, {"start": start, "validator": validator}
+        )
+        remaining = max(total - start, 0)
+        if chunk_timesteps is not None:
+            remaining = min(remaining, chunk_timesteps)
+        if remaining:
+            model.learn(remaining, callback=callbacks, reset_num_timesteps=False,
+                        log_interval=10 if cfg.algo in OFF_POLICY else 1)  # fmt: skip
+        wall = time.perf_counter() - started
+        steps = int(model.num_timesteps) - start
+        final = validator.evaluate(model)
+        save_policy_files(model, out / "model")
+        _save_checkpoint(model, cfg, out / "checkpoints" / f"step_{model.num_timesteps}")
+        _merge_progress(out)
+        result = {
+            "model_path": str(out / "best_model.zip"),
+            "final_model_path": str(out / "model.zip"),
+            "algo": cfg.algo,
+            "total_timesteps": int(model.num_timesteps),
+            "run_total_timesteps": total,
+            "finished": int(model.num_timesteps) >= total,
+            "timesteps_this_call": steps,
+            "wall_time_s": wall,
+            "env_steps_per_s": steps / wall if wall > 0 else 0.0,
+            "seed": cfg.seed,
+            "resumed_from": start if resume is not None else None,
+            "best_validation": validator.best,
+            "final_validation": final,
+            "classical_validation": validator.classical,
+            "validation_suite": validator.suite.name,
+        }
+        from wsp_env.cli import write_json
 
-    write_json(out / "train.json", result)
-    return result
+        write_json(out / "train.json", result)
+        return result
+    except BaseException:
+        # a fresh run that ends before its first checkpoint leaves no folder behind (it could
+        # neither be resumed nor started again in place)
+        if resume is None and latest_checkpoint(out) is None:
+            shutil.rmtree(out, ignore_errors=True)
+        raise
 
 
 def _merge_progress(out: Path) -> None:
