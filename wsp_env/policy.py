@@ -183,7 +183,7 @@ def _run_config(model_path: Path) -> dict[str, Any] | None:
     folder above a checkpoint), or None."""
     import yaml
 
-    for folder in (model_path.parent, *model_path.parents[:3]):
+    for folder in model_path.parents[:4]:
         cfg = folder / "config.yaml"
         if cfg.exists():
             data = yaml.safe_load(cfg.read_text())

@@ -81,10 +81,7 @@ KEEP_CHECKPOINTS = 3  # the newest ones; the best model is kept apart (best_mode
 class EvalConfig:
     suite: str = "validation"
     every_timesteps: int = field(default=500_000, metadata={"gt": 0})
-
-    def validate(self, where: str) -> None:
-        if self.suite == "heldout":
-            raise ConfigError(f"{where}.suite: heldout is for final comparisons, never selection")
+    # the judging suites (JUDGING_SUITES) are refused by name once loaded (Validator)
 
 
 @dataclass(frozen=True)
@@ -434,79 +431,76 @@ def latest_checkpoint(run_dir: Path) -> Path | None:
     return max(found)[1] if found else None
 
 
-class _Callbacks:
-    """Builds SB3 callbacks lazily (SB3 is imported only when training)."""
+def _callbacks(cfg: TrainConfig, out: Path, total: int, progress: bool, state: dict) -> Any:
+    """The run's SB3 callbacks (defined here: SB3 is imported only when training)."""
+    from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 
-    @staticmethod
-    def make(cfg: TrainConfig, out: Path, total: int, progress: bool, state: dict) -> Any:
-        from stable_baselines3.common.callbacks import BaseCallback, CallbackList
+    class EpisodeMetrics(BaseCallback):
+        """Per-episode physics metrics and reward terms into SB3's logger (TensorBoard,
+        CSV): the safety costs logged apart from the return."""
 
-        class EpisodeMetrics(BaseCallback):
-            """Per-episode physics metrics and reward terms into SB3's logger (TensorBoard,
-            CSV): the safety costs logged apart from the return."""
+        def _on_step(self) -> bool:
+            for info in self.locals.get("infos", ()):
+                m = info.get("metrics")
+                if m is None:
+                    continue
+                self.logger.record_mean("episode/stopping_distance_m", m["stopping_distance_m"])
+                self.logger.record_mean("episode/sliding_energy_kJ", m["sliding_energy_kJ"])
+                self.logger.record_mean("episode/max_lock_s", m["max_lock_s"])
+                self.logger.record_mean("episode/air_litres", m["air_litres"])
+                self.logger.record_mean("episode/max_sliding_kmh", m["max_sliding_kmh"])
+                self.logger.record_mean("episode/return", m["episode_return"])
+                for k, v in m["episode_reward_terms"].items():
+                    self.logger.record_mean(f"episode/reward_{k}", v)
+                sc = info.get("scenario")
+                if sc is not None:  # learning curves split by condition
+                    self.logger.record_mean(
+                        f"episode_by_rail/{sc['rail']}_stopping_distance_m",
+                        m["stopping_distance_m"],
+                    )
+            return True
 
-            def _on_step(self) -> bool:
-                for info in self.locals.get("infos", ()):
-                    m = info.get("metrics")
-                    if m is None:
-                        continue
-                    self.logger.record_mean("episode/stopping_distance_m", m["stopping_distance_m"])
-                    self.logger.record_mean("episode/sliding_energy_kJ", m["sliding_energy_kJ"])
-                    self.logger.record_mean("episode/max_lock_s", m["max_lock_s"])
-                    self.logger.record_mean("episode/air_litres", m["air_litres"])
-                    self.logger.record_mean("episode/max_sliding_kmh", m["max_sliding_kmh"])
-                    self.logger.record_mean("episode/return", m["episode_return"])
-                    for k, v in m["episode_reward_terms"].items():
-                        self.logger.record_mean(f"episode/reward_{k}", v)
-                    sc = info.get("scenario")
-                    if sc is not None:  # learning curves split by condition
-                        self.logger.record_mean(
-                            f"episode_by_rail/{sc['rail']}_stopping_distance_m",
-                            m["stopping_distance_m"],
-                        )
-                return True
+    class Periodic(BaseCallback):
+        """Checkpoints and validation at rollout boundaries (a clean state to resume from)."""
 
-        class Periodic(BaseCallback):
-            """Checkpoints and validation at rollout boundaries (a clean state to resume from)."""
+        def __init__(self) -> None:
+            super().__init__()
+            self.next_ckpt = _next_multiple(state["start"], cfg.checkpoint_every_timesteps)
+            self.next_eval = _next_multiple(state["start"], cfg.eval.every_timesteps)
 
-            def __init__(self) -> None:
-                super().__init__()
-                self.next_ckpt = _next_multiple(state["start"], cfg.checkpoint_every_timesteps)
-                self.next_eval = _next_multiple(state["start"], cfg.eval.every_timesteps)
+        def _on_step(self) -> bool:
+            return True
 
-            def _on_step(self) -> bool:
-                return True
+        def _on_rollout_start(self) -> None:
+            n = self.model.num_timesteps
+            if n >= self.next_eval:
+                self.next_eval = _next_multiple(n, cfg.eval.every_timesteps)
+                state["validator"].evaluate(self.model, self.logger)
+            if n >= self.next_ckpt:
+                self.next_ckpt = _next_multiple(n, cfg.checkpoint_every_timesteps)
+                _save_checkpoint(self.model, cfg, out / "checkpoints" / f"step_{n}")
 
-            def _on_rollout_start(self) -> None:
-                n = self.model.num_timesteps
-                if n >= self.next_eval:
-                    self.next_eval = _next_multiple(n, cfg.eval.every_timesteps)
-                    state["validator"].evaluate(self.model, self.logger)
-                if n >= self.next_ckpt:
-                    self.next_ckpt = _next_multiple(n, cfg.checkpoint_every_timesteps)
-                    _save_checkpoint(self.model, cfg, out / "checkpoints" / f"step_{n}")
+    class Progress(BaseCallback):
+        def _on_training_start(self) -> None:
+            from tqdm import tqdm
 
-        class Progress(BaseCallback):
-            def _on_training_start(self) -> None:
-                from tqdm import tqdm
+            self.bar = tqdm(total=total, initial=self.model.num_timesteps, unit="step",
+                            desc="train", smoothing=0.1, dynamic_ncols=True)  # fmt: skip
 
-                self.bar = tqdm(total=total, initial=self.model.num_timesteps, unit="step",
-                                desc="train", smoothing=0.1, dynamic_ncols=True)  # fmt: skip
+        def _on_step(self) -> bool:
+            self.bar.n = self.model.num_timesteps
+            if self.n_calls % 50 == 0:
+                self.bar.refresh()
+            return True
 
-            def _on_step(self) -> bool:
-                self.bar.n = self.model.num_timesteps
-                if self.n_calls % 50 == 0:
-                    self.bar.refresh()
-                return True
+        def _on_training_end(self) -> None:
+            self.bar.n = self.model.num_timesteps
+            self.bar.close()
 
-            def _on_training_end(self) -> None:
-                self.bar.n = self.model.num_timesteps
-                self.bar.close()
-
-        cbs = [EpisodeMetrics(), Periodic()]
-        if progress:
-            cbs.append(Progress())
-        return CallbackList(cbs)
+    cbs = [EpisodeMetrics(), Periodic()]
+    if progress:
+        cbs.append(Progress())
+    return CallbackList(cbs)
 
 
 def _next_multiple(n: int, every: int) -> int:
@@ -684,9 +678,7 @@ def train(
     try:
         formats = ["csv"] + (["tensorboard"] if _have_tensorboard() else [])
         model.set_logger(configure(str(out / "logs" / f"from_step_{start}"), formats))
-        callbacks = _Callbacks.make(
-            cfg, out, total, progress, {"start": start, "validator": validator}
-        )
+        callbacks = _callbacks(cfg, out, total, progress, {"start": start, "validator": validator})
         remaining = max(total - start, 0)
         if chunk_timesteps is not None:
             remaining = min(remaining, chunk_timesteps)
