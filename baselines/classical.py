@@ -154,6 +154,21 @@ class ClassicalWSP:
         self.anchor_v[env_ids] = np.nan
         self.next_release[env_ids] = self.n_axles - 1  # the last axle first
 
+    # bound once (``bind``); everything else that is an array evolves (``state_dict``)
+    _CONSTANT = frozenset({"p_max", "valve_of_axle", "valve_starts", "_rows"})
+
+    def state_dict(self) -> dict[str, np.ndarray]:
+        """Copies of the evolving state (a checkpointed residual-mode run resumes bit for bit)."""
+        return {
+            k: v.copy()
+            for k, v in vars(self).items()
+            if isinstance(v, np.ndarray) and k not in self._CONSTANT
+        }
+
+    def load_state_dict(self, state: dict[str, np.ndarray]) -> None:
+        for k, v in state.items():
+            setattr(self, k, v.copy())
+
     def reference_speed(self) -> np.ndarray:
         """The WSP's current reference-speed estimate (m/s) per environment."""
         return self.v_ref

@@ -90,7 +90,9 @@ def _add_simulate(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--policy",
         default="none",
-        help="none (full demand, no WSP), classical, oracle, or a trained model file (none)",
+        help="none (full demand, no WSP), classical, oracle, a shipped policy's name "
+        "(agents/pretrained) or a trained model file (none); model files are pickles: "
+        "load only files you trust",
     )
     p.add_argument("--wsp-config", default=None, help="classical WSP parameters (YAML)")
     p.add_argument("--seed", type=int, default=0, help="draws adhesion level and pattern (0)")
@@ -200,7 +202,8 @@ def _add_evaluate(sub: argparse._SubParsersAction) -> None:
         "--policy",
         action="append",
         required=True,
-        help="classical | none | oracle | PATH (repeat to compare)",
+        help="classical | none | oracle | a shipped policy's name | PATH.zip (repeat to "
+        "compare); model files are pickles: load only files you trust",
     )
     p.add_argument("--suite", default="quick", help="quick | en15595 | heldout | PATH.yaml")
     p.add_argument("--vehicle", default="uic_z1", help="vehicle id or YAML path (uic_z1)")
@@ -477,6 +480,38 @@ def _print_validate(result: dict[str, Any]) -> None:
 # ---- entry point ----------------------------------------------------------------------------
 
 
+# ---- export-policy ----------------------------------------------------------------------------
+
+
+def _add_export(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "export-policy",
+        help="export a trained PPO/A2C policy to ONNX, normalisation folded in",
+        description="Write the deterministic actor of a trained model (normalisation folded "
+        "in) as ONNX for an embedded WSP, and measure ONNX Runtime's per-decision latency. "
+        "Model files are pickles: load only files you trust. See wsp_env/export.py.",
+    )
+    p.add_argument("model", help="a model file written by `wsp-env train` (.zip)")
+    p.add_argument("--onnx", required=True, help="output path (.onnx)")
+    p.add_argument("--json", dest="json_path", default=None, help="write the result here")
+    p.set_defaults(func=cmd_export)
+
+
+def cmd_export(args: argparse.Namespace) -> dict[str, Any]:
+    from wsp_env.export import export_onnx
+
+    return export_onnx(args.model, args.onnx)
+
+
+def _print_export(result: dict[str, Any]) -> None:
+    print(
+        f"wrote {result['onnx']} ({result['inputs']} inputs, frame stack "
+        f"{result['frame_stack']}); ONNX Runtime, one decision: median "
+        f"{result['latency_median_us']:.0f} us, p99 {result['latency_p99_us']:.0f} us "
+        "(the WSP cycle is 20,000 us)"
+    )
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="wsp-env", description="Wheel slide protection braking: simulate, evaluate, train."
@@ -488,6 +523,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_bench(sub)
     _add_train(sub)
     _add_validate(sub)
+    _add_export(sub)
     return parser
 
 
@@ -498,6 +534,7 @@ PRINTERS = {
     "bench": _print_bench,
     "train": _print_train,
     "validate": _print_validate,
+    "export-policy": _print_export,
 }
 
 

@@ -9,21 +9,27 @@ adhesion level and pattern, load, pad friction, gradient, demand). Every control
 decide how fast the cylinder gets there; nothing can exceed the demand). Out-of-range values are
 clipped and counted in ``info["action_clipped"]``; a NaN raises ``ValueError``.
 ``action_mode="discrete"``: ``MultiDiscrete([3] * n_valves)`` with 0 = vent, 1 = hold,
-2 = fill (apply), like real dump/hold valves. Valves are per axle, or per bogie with
-``valve_group="bogie"``.
+2 = fill (apply), like real dump/hold valves. ``action_mode="residual"``: a residual on the
+frozen classical WSP (``configs/wsp/classical.yaml``), which runs inside the environment on the
+same observation: ``Box(-1, 1, (n_valves,))``, valve ``j`` asks for the fraction
+``clip(f_j + residual_scale * a_j, 0, 1)`` of the demand, ``f_j`` the classical WSP's own
+request — so the zero action *is* the classical WSP, and a learner starts from it. Valves are
+per axle, or per bogie with ``valve_group="bogie"``.
 
 **Observation** — ``Box(-5, 5, float32)``, what a WSP measures, normalised (``v_s`` = vehicle
 maximum speed): per axle the wheel speed ``/ v_s``, the wheel deceleration ``/ 10 m/s^2``, the
 slip against the reference speed ``(v_ref - v_i) / max(v_ref, 1 m/s)``, the cylinder pressure
 ``/ p_max``; then the demand ``/ p_max``, the reference speed ``/ v_s`` (fastest wheel, falling
 at most 2.5 m/s^2 — above any dry-rail deceleration, so it is the train speed on good adhesion),
-and the previous action. ``privileged=True`` appends the true train speed,
-each axle's friction level and true creepage. ``accelerometer=True`` gives the WSP a body
+and the previous valve command. ``privileged=True`` appends the true train speed, each
+axle's friction level and true creepage. ``accelerometer=True`` gives the WSP a body
 accelerometer, as accelerometer-aided WSPs have: the reference speed then falls at the
 deceleration it reads over each period — a specific force, so the gradient's ``g sin(theta)``
 is missing from it, plus a bias drawn per episode within ``+-accelerometer_bias_mps2``
 (0.05 m/s^2) — instead of the fixed limit, and the reading ``/ 10 m/s^2`` is appended to the
-observation. With it the reference follows the train when every wheel slides.
+observation. With it the reference follows the train when every wheel slides. With
+``action_mode="residual"`` the classical WSP's requests for this period (one per valve, as
+actions in ``[-1, 1]``) come last of all.
 
 **Reward** — minus the stop's cost in metres of stopping distance, divided by
 ``distance_scale_m`` (100 m); the terms, each in ``info["reward_terms"]``, and their exchange
@@ -151,6 +157,8 @@ class ScenarioConfig:
             raise ConfigError(f"{prefix}rails: needs non-negative weights, not all zero")
 
 
+ACTION_MODES = ("continuous", "discrete", "residual")
+
 OPTION_KEYS = (
     "speed_kmh", "rail", "mu_contaminated", "pattern", "load_factor", "pad_factor",
     "gradient_permille", "demand", "sections", "axle_mu_factor", "recovery_basis",
@@ -174,6 +182,7 @@ class _BrakingCore:
         n_envs: int,
         vehicle: str | VehicleConfig = "uic_z1",
         action_mode: str = "continuous",
+        residual_scale: float = 1.0,
         valve_group: str | None = None,
         privileged: bool = False,
         accelerometer: bool = False,
@@ -193,8 +202,12 @@ class _BrakingCore:
             veh = dataclasses.replace(
                 veh, brake=dataclasses.replace(veh.brake, valve_group=valve_group)
             )
-        if action_mode not in ("continuous", "discrete"):
-            raise ValueError(f"action_mode: {action_mode!r} is not 'continuous' or 'discrete'")
+        if action_mode not in ACTION_MODES:
+            raise ValueError(
+                f"action_mode: {action_mode!r} is not one of {', '.join(map(repr, ACTION_MODES))}"
+            )
+        if not (np.isfinite(residual_scale) and 0.0 < residual_scale <= 1.0):
+            raise ValueError(f"residual_scale: must be in (0, 1], got {residual_scale!r}")
         self.vehicle = veh
         self.reward = _config(RewardConfig, reward, "reward")
         self.scenario = _config(ScenarioConfig, scenario, "scenario")
@@ -209,8 +222,9 @@ class _BrakingCore:
         self.n_axles = self.sim.n_axles
         self.valve_of_axle = self.sim.arrays.valve_of_axle
         self.n_valves = int(self.valve_of_axle.max()) + 1
-        self.mode = K.MODE_CONTINUOUS if action_mode == "continuous" else K.MODE_DISCRETE
+        self.mode = K.MODE_DISCRETE if action_mode == "discrete" else K.MODE_CONTINUOUS
         self.action_mode = action_mode
+        self.residual_scale = float(residual_scale)
         self.privileged = privileged
         if not (np.isfinite(accelerometer_bias_mps2) and accelerometer_bias_mps2 >= 0.0):
             raise ValueError(
@@ -218,8 +232,10 @@ class _BrakingCore:
             )
         self.accelerometer = bool(accelerometer)
         self.accelerometer_bias_mps2 = float(accelerometer_bias_mps2)
-        self.obs_dim = K.obs_size(self.n_axles, self.n_valves, privileged, self.accelerometer)
-        self.obs = np.zeros((n_envs, self.obs_dim), dtype=np.float32)
+        kernel_dim = K.obs_size(self.n_axles, self.n_valves, privileged, self.accelerometer)
+        self._kobs = np.zeros((n_envs, kernel_dim), dtype=np.float32)  # the kernel writes it
+        residual = action_mode == "residual"
+        self.obs_dim = kernel_dim + (self.n_valves if residual else 0)
         self.terms = np.zeros((n_envs, K.N_TERMS))
         self.flags = np.zeros((n_envs, K.N_F), dtype=np.int64)
         self.wsp = np.zeros((n_envs, K.N_W))
@@ -238,6 +254,48 @@ class _BrakingCore:
         self.episode_return = np.zeros(n_envs)
         self.episode_terms = np.zeros((n_envs, K.N_TERMS))
         self._step_fn = K.env_step_parallel if n_envs >= PARALLEL_MIN_ENVS else K.env_step_serial
+        # residual mode: the classical WSP runs beside the kernel; its requests for the coming
+        # period are computed once per period, when the observation is first read after a step
+        # or a reset (``obs``), so that it advances exactly once per control period
+        self.base: Any = None
+        if residual:
+            from wsp_env.baselines.classical import ClassicalWSP, load_wsp_config
+
+            self.base = ClassicalWSP(load_wsp_config())
+            self.base.bind(self)
+            self.base_action = np.ones((n_envs, self.n_valves), dtype=np.float32)
+            self._obs_full = np.zeros((n_envs, self.obs_dim), dtype=np.float32)
+            self._base_stale = True
+            self._base_pending: list[int] = list(range(n_envs))
+
+    # ---- observation ------------------------------------------------------------------------
+
+    @property
+    def obs(self) -> np.ndarray:
+        """Current observations ``(n_envs, obs_dim)`` (module docstring)."""
+        if self.base is None:
+            return self._kobs
+        if self._base_stale:
+            self._refresh_base()
+        return self._obs_full
+
+    def _refresh_base(self) -> None:
+        """Residual mode: advance the classical WSP one period on the current observations."""
+        if self._base_pending:
+            self.base.reset(np.array(self._base_pending, dtype=np.int64))
+            self._base_pending.clear()
+        self.base_action[...] = self.base.act(self._kobs)
+        width = self._kobs.shape[1]
+        self._obs_full[:, :width] = self._kobs
+        self._obs_full[:, width:] = self.base_action
+        self._base_stale = False
+
+    def final_obs(self, e: int) -> np.ndarray:
+        """The observation env ``e`` ended with, without advancing the classical WSP (residual
+        mode: its requests of the last period stand in; nothing acts on a final observation)."""
+        if self.base is None:
+            return self._kobs[e].copy()
+        return np.concatenate([self._kobs[e], self.base_action[e]])
 
     # ---- spaces ----------------------------------------------------------------------------
 
@@ -306,8 +364,11 @@ class _BrakingCore:
         self.wsp[e, K.W_ACC_BIAS] = drawn
         K.reset_obs(
             e, sim.env_par, sim.axle_par, sim.env_state, sim.axle_state, self.wsp,
-            self.prev_wheel, self.prev_action, self.obs_par, sim.control_period_s, self.obs,
+            self.prev_wheel, self.prev_action, self.obs_par, sim.control_period_s, self._kobs,
         )  # fmt: skip
+        if self.base is not None:
+            self._base_pending.append(e)
+            self._base_stale = True
         self.episode_return[e] = 0.0
         self.episode_terms[e] = 0.0
         return {"scenario": self.describe(e)}
@@ -348,16 +409,30 @@ class _BrakingCore:
 
     def step(self, actions: np.ndarray) -> None:
         sim = self.sim
+        clipped = None
+        if self.base is not None:  # residual on the classical WSP's requests for this period
+            if self._base_stale:
+                self._refresh_base()
+            residual = np.clip(actions, -1.0, 1.0).astype(np.float64)
+            clipped = (residual != actions).sum(axis=1)
+            # float64: with a zero residual the command is the classical WSP's, bit for bit
+            frac = (
+                0.5 * (self.base_action.astype(np.float64) + 1.0) + self.residual_scale * residual
+            )
+            actions = 2.0 * np.clip(frac, 0.0, 1.0) - 1.0
         self._step_fn(
             self.mode, actions, self.valve_of_axle, sim.n_sub, sim.dt_s, sim.control_period_s,
             sim.cmd, sim.env_par, sim.axle_par, sim.sections, sim.env_state, sim.axle_state,
             sim.field, sim.env_acc, sim.axle_acc, self.wsp, self.prev_wheel, self.prev_action,
-            self.obs_par, self.reward_par, self.obs, self.terms, self.flags,
+            self.obs_par, self.reward_par, self._kobs, self.terms, self.flags,
         )  # fmt: skip
+        if self.base is not None:
+            self.flags[:, K.F_CLIPPED] = clipped
+            self._base_stale = True
 
     # ---- state (checkpoints: a resumed training run continues bit for bit) -----------------
 
-    _STATE_ARRAYS = ("obs", "terms", "flags", "wsp", "prev_wheel", "prev_action",
+    _STATE_ARRAYS = ("_kobs", "terms", "flags", "wsp", "prev_wheel", "prev_action",
                      "episode_return", "episode_terms")  # fmt: skip
     _SIM_ARRAYS = ("env_par", "axle_par", "sections", "env_state", "axle_state", "field",
                    "env_acc", "axle_acc", "cmd", "initial_energy_J")  # fmt: skip
@@ -365,13 +440,22 @@ class _BrakingCore:
     def state_dict(self) -> dict[str, Any]:
         """Everything that evolves: the physics, the WSP observation state, the episodes'
         scenarios and each environment's random generator (copies)."""
-        return {
+        state = {
             "n_envs": self.n_envs,
             "core": {k: getattr(self, k).copy() for k in self._STATE_ARRAYS},
             "sim": {k: getattr(self.sim, k).copy() for k in self._SIM_ARRAYS},
             "setups": list(self.sim.setups),
             "rngs": [r.bit_generator.state for r in self.rngs],
         }
+        if self.base is not None:
+            state["base"] = {
+                "wsp": self.base.state_dict(),
+                "action": self.base_action.copy(),
+                "obs": self._obs_full.copy(),
+                "stale": self._base_stale,
+                "pending": list(self._base_pending),
+            }
+        return state
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         """Restore ``state_dict``'s content into this core (same vehicle and ``n_envs``)."""
@@ -384,6 +468,13 @@ class _BrakingCore:
         self.sim.setups[:] = state["setups"]
         for r, s in zip(self.rngs, state["rngs"], strict=True):
             r.bit_generator.state = s
+        if self.base is not None:
+            base = state["base"]
+            self.base.load_state_dict(base["wsp"])
+            self.base_action[...] = base["action"]
+            self._obs_full[...] = base["obs"]
+            self._base_stale = bool(base["stale"])
+            self._base_pending[:] = base["pending"]
 
     def episode_info(self, e: int) -> dict[str, Any]:
         metrics = run_metrics(self.sim, e)
@@ -517,12 +608,12 @@ class WSPBrakingVectorEnv(VectorEnv):
         }
         ended = np.flatnonzero(terminated | truncated)
         if ended.size:
-            final_obs = np.zeros_like(core.obs)
+            final_obs = np.zeros((self.num_envs, core.obs_dim), dtype=np.float32)
             final_info = np.full(self.num_envs, None, dtype=object)
             mask = np.zeros(self.num_envs, dtype=bool)
             mask[ended] = True
             for e in ended:  # only the environments that just ended
-                final_obs[e] = core.obs[e]
+                final_obs[e] = core.final_obs(int(e))
                 final_info[e] = {"metrics": core.episode_info(e), "scenario": core.describe(e)}
                 core.reset_env(int(e), None)
             info.update(

@@ -65,32 +65,18 @@ class SB3Policy:
         p = Path(path)
         if not p.exists():
             raise FileNotFoundError(f"{p}: no such policy file")
-        config = _run_config(p)
-        algo = config.get("algo") if config else None
-        import stable_baselines3 as sb3
-
-        classes = {"ppo": sb3.PPO, "sac": sb3.SAC, "td3": sb3.TD3, "a2c": sb3.A2C}
+        meta = model_metadata(p)
+        classes = _algo_classes()
+        algo = meta["algo"]
+        if algo not in classes:
+            raise ValueError(f"{p}: algorithm {algo!r} is not one of {', '.join(classes)}")
         try:
-            import sb3_contrib
-
-            classes.update(recurrent_ppo=sb3_contrib.RecurrentPPO, tqc=sb3_contrib.TQC)
-        except ImportError:  # sb3-contrib is optional
-            pass
-        order = [classes[algo]] if algo in classes else list(classes.values())
-        model = None
-        for cls in order:
-            try:
-                model = cls.load(p, device="cpu")
-                break
-            except Exception:
-                continue
-        if model is None:
-            raise ValueError(f"{p}: not a stable-baselines3 model file ({', '.join(classes)})")
-        env_kwargs = (config or {}).get("env_kwargs", {}) or {}
-        n_stack = int((config or {}).get("frame_stack", 1) or 1)
-        # a run folder's models share stems (best_model, model): the folder tells them apart
-        name = f"{p.parent.name}/{p.stem}" if config is not None else p.stem
-        self._setup(model, _load_normalisation(p), env_kwargs, name, n_stack)
+            model = classes[algo].load(p, device="cpu")
+        except Exception as err:  # a damaged or foreign file: one line, not a traceback
+            raise ValueError(f"{p}: cannot load as a {algo} model ({type(err).__name__})") from None
+        self.vehicle = meta.get("vehicle")
+        self._setup(model, _load_normalisation(p), meta["env_kwargs"], meta["name"],
+                    int(meta["frame_stack"]))  # fmt: skip
 
     @classmethod
     def from_model(
@@ -98,6 +84,7 @@ class SB3Policy:
     ) -> SB3Policy:
         """A policy over a live model (training's validation): its normalisation as it is now."""
         self = cls.__new__(cls)
+        self.vehicle = None
         self._setup(model, model.get_vec_normalize_env(), env_kwargs, name, n_stack)
         return self
 
@@ -122,6 +109,11 @@ class SB3Policy:
         self._episode_start: np.ndarray | None = None
 
     def bind(self, core: Any) -> None:
+        if self.vehicle is not None and self.vehicle != core.vehicle.id:
+            raise ValueError(
+                f"policy {self.name}: trained for vehicle {self.vehicle!r}, this run's vehicle "
+                f"is {core.vehicle.id!r}"
+            )
         space = self.model.observation_space
         if space.shape != (core.obs_dim * self.n_stack,):
             raise ValueError(
@@ -173,9 +165,82 @@ class SB3Policy:
 
 # the environment settings a trained model needs in evaluation (its spaces and timing)
 POLICY_ENV_KWARGS = (
-    "action_mode", "valve_group", "privileged", "accelerometer", "accelerometer_bias_mps2",
-    "control_period_s",
+    "action_mode", "residual_scale", "valve_group", "privileged", "accelerometer",
+    "accelerometer_bias_mps2", "control_period_s",
 )  # fmt: skip
+
+
+META_NAME = "wsp_env.json"  # the metadata entry ``wsp-env train`` adds to every model file
+
+
+def _algo_classes() -> dict[str, type]:
+    import stable_baselines3 as sb3
+
+    classes = {"ppo": sb3.PPO, "sac": sb3.SAC, "td3": sb3.TD3, "a2c": sb3.A2C}
+    try:
+        import sb3_contrib
+
+        classes.update(recurrent_ppo=sb3_contrib.RecurrentPPO, tqc=sb3_contrib.TQC)
+    except ImportError:  # sb3-contrib is optional
+        pass
+    return classes
+
+
+def policy_metadata(config: dict[str, Any], name: str) -> dict[str, Any]:
+    """What a model file must say about itself to be evaluated (``write_model_metadata``)."""
+    env_kwargs = config.get("env_kwargs") or {}
+    vehicle = env_kwargs.get("vehicle", "uic_z1")
+    return {
+        "format": "wsp-env-policy/1",
+        "name": name,
+        "algo": config["algo"],
+        "vehicle": vehicle if isinstance(vehicle, str) else None,
+        "frame_stack": int(config.get("frame_stack", 1) or 1),
+        "env_kwargs": {k: env_kwargs[k] for k in POLICY_ENV_KWARGS if k in env_kwargs},
+    }
+
+
+def write_model_metadata(model_path: str | Path, meta: dict[str, Any]) -> None:
+    """Store ``meta`` inside the model's zip (SB3 ignores the extra entry), replacing any."""
+    import json
+    import zipfile
+
+    p = Path(model_path)
+    with zipfile.ZipFile(p) as z:
+        entries = {n: z.read(n) for n in z.namelist() if n != META_NAME}
+    tmp = p.with_name(p.name + ".tmp")
+    with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
+        for n, data in entries.items():
+            z.writestr(n, data)
+        z.writestr(META_NAME, json.dumps(meta, indent=1))
+    tmp.replace(p)
+
+
+def model_metadata(model_path: Path) -> dict[str, Any]:
+    """The algorithm and environment settings of a model file: its own metadata entry, else the
+    ``config.yaml`` of the training run it sits in. Neither: one line saying so."""
+    import json
+    import zipfile
+
+    try:
+        with zipfile.ZipFile(model_path) as z:
+            if META_NAME in z.namelist():
+                meta = json.loads(z.read(META_NAME))
+                if isinstance(meta, dict) and "algo" in meta:
+                    meta.setdefault("name", model_path.stem)
+                    meta.setdefault("frame_stack", 1)
+                    meta.setdefault("env_kwargs", {})
+                    return meta
+    except zipfile.BadZipFile:
+        raise ValueError(f"{model_path}: not a model file (not a zip archive)") from None
+    config = _run_config(model_path)
+    if config is None or "algo" not in config:
+        raise ValueError(
+            f"{model_path}: no {META_NAME} inside and no config.yaml of a training run beside "
+            "it: cannot tell the algorithm (models written by `wsp-env train` carry both)"
+        )
+    # a run folder's models share stems (best_model, model): the folder tells them apart
+    return policy_metadata(config, f"{model_path.parent.name}/{model_path.stem}")
 
 
 def _run_config(model_path: Path) -> dict[str, Any] | None:
@@ -210,8 +275,20 @@ def _load_normalisation(model_path: Path) -> Any:
     return None
 
 
+def pretrained_dir() -> Path:
+    """Where the shipped policies live (``agents/pretrained``, installed with the package)."""
+    import wsp_env.agents
+
+    return Path(wsp_env.agents.__file__).parent / "pretrained"
+
+
+def shipped_policies() -> list[str]:
+    return sorted(p.stem for p in pretrained_dir().glob("*.zip"))
+
+
 def make_policy(name_or_path: str, wsp_config: str | None = None) -> Any:
-    """``classical``, ``none``, ``oracle`` or a path to a trained model file."""
+    """``classical``, ``none``, ``oracle``, a shipped policy's name (``agents/pretrained``) or
+    a path to a trained model file. Model files are pickles: load only files you trust."""
     if name_or_path == "none":
         return NoWSP()
     if name_or_path == "classical":
@@ -225,7 +302,9 @@ def make_policy(name_or_path: str, wsp_config: str | None = None) -> Any:
     path = Path(name_or_path)
     if path.suffix == ".zip" or path.exists():
         return SB3Policy(path)
+    if name_or_path in shipped_policies():
+        return SB3Policy(pretrained_dir() / f"{name_or_path}.zip")
+    names = ", ".join(["classical", "none", "oracle", *shipped_policies()])
     raise ValueError(
-        f"policy: {name_or_path!r} is neither a policy name (classical, none, oracle) "
-        "nor an existing model file"
+        f"policy: {name_or_path!r} is neither a policy name ({names}) nor an existing model file"
     )

@@ -64,7 +64,7 @@ POLICY_KWARGS = (
 # keyword arguments of the algorithm that the trainer sets itself
 MANAGED = ("policy", "env", "seed", "policy_kwargs", "tensorboard_log", "verbose", "device")
 ENV_KWARGS = (
-    "vehicle", "action_mode", "valve_group", "privileged", "accelerometer",
+    "vehicle", "action_mode", "residual_scale", "valve_group", "privileged", "accelerometer",
     "accelerometer_bias_mps2", "reward", "scenario", "rails_config", "control_period_s",
     "substep_s", "max_time_s",
 )  # fmt: skip
@@ -373,9 +373,14 @@ def _braking_core(env: Any) -> Any:
     return env.venv.core
 
 
-def save_policy_files(model: Any, stem: Path) -> None:
-    """``stem.zip`` and, with normalisation, ``stem.vecnormalize.pkl`` beside it."""
+def save_policy_files(model: Any, stem: Path, cfg: TrainConfig) -> None:
+    """``stem.zip`` (with the run's algorithm and environment settings inside: it loads
+    anywhere, ``policy.model_metadata``) and, with normalisation, ``stem.vecnormalize.pkl``."""
+    from wsp_env.policy import policy_metadata, write_model_metadata
+
     model.save(stem.with_suffix(".zip"))
+    name = f"{stem.parent.name.removesuffix('.tmp')}/{stem.name}"
+    write_model_metadata(stem.with_suffix(".zip"), policy_metadata(cfg.as_yaml_dict(), name))
     norm = model.get_vec_normalize_env()
     if norm is not None:
         norm.save(str(stem.with_suffix(".vecnormalize.pkl")))
@@ -388,7 +393,7 @@ def _save_checkpoint(model: Any, cfg: TrainConfig, folder: Path) -> None:
     tmp = folder.with_name(folder.name + ".tmp")
     shutil.rmtree(tmp, ignore_errors=True)
     tmp.mkdir(parents=True)
-    save_policy_files(model, tmp / "model")
+    save_policy_files(model, tmp / "model", cfg)
     if cfg.algo in OFF_POLICY:
         model.save_replay_buffer(tmp / "replay_buffer.pkl")
     norm = model.get_vec_normalize_env()
@@ -555,7 +560,7 @@ class Validator:
         self.history.append(row)
         if self.best is None or _better(row, self.best):
             self.best = row
-            save_policy_files(model, self.out / "best_model")
+            save_policy_files(model, self.out / "best_model", self.cfg)
         if logger is not None:
             for k in ("mean_stopping_distance_m", "passed", "mean_sliding_energy_kJ",
                       "stop_vs_classical"):  # fmt: skip
@@ -688,7 +693,7 @@ def train(
         wall = time.perf_counter() - started
         steps = int(model.num_timesteps) - start
         final = validator.evaluate(model)
-        save_policy_files(model, out / "model")
+        save_policy_files(model, out / "model", cfg)
         _save_checkpoint(model, cfg, out / "checkpoints" / f"step_{model.num_timesteps}")
         _merge_progress(out)
         result = {
