@@ -165,8 +165,8 @@ class SB3Policy:
 
 # the environment settings a trained model needs in evaluation (its spaces and timing)
 POLICY_ENV_KWARGS = (
-    "action_mode", "residual_scale", "valve_group", "privileged", "accelerometer",
-    "accelerometer_bias_mps2", "control_period_s",
+    "action_mode", "residual_scale", "residual_deadband", "valve_group", "privileged",
+    "accelerometer", "accelerometer_bias_mps2", "control_period_s",
 )  # fmt: skip
 
 

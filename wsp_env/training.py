@@ -64,9 +64,9 @@ POLICY_KWARGS = (
 # keyword arguments of the algorithm that the trainer sets itself
 MANAGED = ("policy", "env", "seed", "policy_kwargs", "tensorboard_log", "verbose", "device")
 ENV_KWARGS = (
-    "vehicle", "action_mode", "residual_scale", "valve_group", "privileged", "accelerometer",
-    "accelerometer_bias_mps2", "reward", "scenario", "rails_config", "control_period_s",
-    "substep_s", "max_time_s",
+    "vehicle", "action_mode", "residual_scale", "residual_deadband", "valve_group", "privileged",
+    "accelerometer", "accelerometer_bias_mps2", "reward", "scenario", "rails_config",
+    "control_period_s", "substep_s", "max_time_s",
 )  # fmt: skip
 SCHEDULE = re.compile(r"^lin_([0-9.eE+-]+)$")
 CONFIG_NAME = "config.yaml"
