@@ -13,8 +13,11 @@ clipped and counted in ``info["action_clipped"]``; a NaN raises ``ValueError``.
 frozen classical WSP (``configs/wsp/classical.yaml``), which runs inside the environment on the
 same observation: ``Box(-1, 1, (n_valves,))``, valve ``j`` asks for the fraction
 ``clip(f_j + residual_scale * a_j, 0, 1)`` of the demand, ``f_j`` the classical WSP's own
-request — so the zero action *is* the classical WSP, and a learner starts from it. Valves are
-per axle, or per bogie with ``valve_group="bogie"``.
+request — so the zero action *is* the classical WSP, and a learner starts from it.
+``residual_deadband`` (0 by default) zeroes residuals up to that size and rescales the rest
+continuously (``sign(a) (|a| - band) / (1 - band)``): a policy's small, ever-changing outputs
+would otherwise move every *hold* a little, and each small drop of the target vents air.
+Valves are per axle, or per bogie with ``valve_group="bogie"``.
 
 **Observation** — ``Box(-5, 5, float32)``, what a WSP measures, normalised (``v_s`` = vehicle
 maximum speed): per axle the wheel speed ``/ v_s``, the wheel deceleration ``/ 10 m/s^2``, the
@@ -96,7 +99,7 @@ from wsp_env.config import (
     load_vehicle,
 )
 from wsp_env.metrics import run_metrics
-from wsp_env.physics.layout import EP_P_MAX
+from wsp_env.physics.layout import CMD_HOLD, EP_P_MAX
 from wsp_env.simulator import RunSetup, TrainSim, draw_run_setup
 
 PARALLEL_MIN_ENVS = 64
@@ -183,6 +186,7 @@ class _BrakingCore:
         vehicle: str | VehicleConfig = "uic_z1",
         action_mode: str = "continuous",
         residual_scale: float = 1.0,
+        residual_deadband: float = 0.0,
         valve_group: str | None = None,
         privileged: bool = False,
         accelerometer: bool = False,
@@ -208,6 +212,8 @@ class _BrakingCore:
             )
         if not (np.isfinite(residual_scale) and 0.0 < residual_scale <= 1.0):
             raise ValueError(f"residual_scale: must be in (0, 1], got {residual_scale!r}")
+        if not (np.isfinite(residual_deadband) and 0.0 <= residual_deadband < 1.0):
+            raise ValueError(f"residual_deadband: must be in [0, 1), got {residual_deadband!r}")
         self.vehicle = veh
         self.reward = _config(RewardConfig, reward, "reward")
         self.scenario = _config(ScenarioConfig, scenario, "scenario")
@@ -225,6 +231,7 @@ class _BrakingCore:
         self.mode = K.MODE_DISCRETE if action_mode == "discrete" else K.MODE_CONTINUOUS
         self.action_mode = action_mode
         self.residual_scale = float(residual_scale)
+        self.residual_deadband = float(residual_deadband)
         self.privileged = privileged
         if not (np.isfinite(accelerometer_bias_mps2) and accelerometer_bias_mps2 >= 0.0):
             raise ValueError(
@@ -407,26 +414,43 @@ class _BrakingCore:
             raise ValueError("action: discrete valve modes must be 0 (vent), 1 (hold) or 2 (fill)")
         return a
 
+    def compose(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """Residual mode: the valve actions the residual ``actions`` make of the classical WSP's
+        requests for this period, and the count of clipped components per env; otherwise
+        ``actions`` unchanged and None."""
+        if self.base is None:
+            return actions, None
+        if self._base_stale:
+            self._refresh_base()
+        residual = np.clip(actions, -1.0, 1.0).astype(np.float64)
+        clipped = (residual != actions).sum(axis=1)
+        band = self.residual_deadband
+        if band > 0.0:  # small residuals leave the classical request (a hold stays a hold)
+            residual = np.sign(residual) * np.maximum(np.abs(residual) - band, 0.0) / (1.0 - band)
+        # float64: with a zero residual the command is the classical WSP's, bit for bit
+        frac = 0.5 * (self.base_action.astype(np.float64) + 1.0) + self.residual_scale * residual
+        return 2.0 * np.clip(frac, 0.0, 1.0) - 1.0, clipped
+
+    def valve_commands(self, actions: np.ndarray) -> np.ndarray:
+        """Per-axle valve commands ``(n_envs, n_axles)`` as the kernel makes them from checked
+        actions (a fraction of the demand, or ``CMD_HOLD``): for models outside the kernel (the
+        roller rig's physical vehicle)."""
+        a, _ = self.compose(actions)
+        a = np.asarray(a, dtype=np.float64)[:, self.valve_of_axle]
+        if self.mode == K.MODE_CONTINUOUS:
+            return 0.5 * (np.clip(a, -1.0, 1.0) + 1.0)
+        return np.where(a == 0.0, 0.0, np.where(a == 1.0, CMD_HOLD, 1.0))
+
     def step(self, actions: np.ndarray) -> None:
         sim = self.sim
-        clipped = None
-        if self.base is not None:  # residual on the classical WSP's requests for this period
-            if self._base_stale:
-                self._refresh_base()
-            residual = np.clip(actions, -1.0, 1.0).astype(np.float64)
-            clipped = (residual != actions).sum(axis=1)
-            # float64: with a zero residual the command is the classical WSP's, bit for bit
-            frac = (
-                0.5 * (self.base_action.astype(np.float64) + 1.0) + self.residual_scale * residual
-            )
-            actions = 2.0 * np.clip(frac, 0.0, 1.0) - 1.0
+        actions, clipped = self.compose(actions)
         self._step_fn(
             self.mode, actions, self.valve_of_axle, sim.n_sub, sim.dt_s, sim.control_period_s,
             sim.cmd, sim.env_par, sim.axle_par, sim.sections, sim.env_state, sim.axle_state,
             sim.field, sim.env_acc, sim.axle_acc, self.wsp, self.prev_wheel, self.prev_action,
             self.obs_par, self.reward_par, self._kobs, self.terms, self.flags,
         )  # fmt: skip
-        if self.base is not None:
+        if clipped is not None:  # residual mode
             self.flags[:, K.F_CLIPPED] = clipped
             self._base_stale = True
 
