@@ -85,8 +85,12 @@ def heldout_table(policies: list[str], learned: str) -> tuple[str, dict[str, Any
             "max_lock_s": max(r["max_lock_s"] for r in rs),
             "max_sliding_kmh": max(r["max_sliding_kmh"] for r in rs),
         }
-    lines += ["", "| policy | passed | mean stop [m] (95 % interval) | sliding energy [kJ] | "
-              "air [l] | worst lock [s] | worst sliding [km/h] |", "|---|---|---|---|---|---|---|"]  # fmt: skip
+    lines += [
+        "",
+        "| policy | passed | mean stop [m] (95 % interval) | sliding energy [kJ] | "
+        "air [l] | worst lock [s] | worst sliding [km/h] |",
+        "|---|---|---|---|---|---|---|",
+    ]
     for p in policies:
         o = overall[p]
         lines.append(
@@ -96,9 +100,14 @@ def heldout_table(policies: list[str], learned: str) -> tuple[str, dict[str, Any
         )
     acceptance = _acceptance(results["classical"], results[learned])
     lines += ["", "Acceptance against the classical WSP:"]
-    lines += [f"- {k}: {v['text']} — {'met' if v['met'] else 'NOT met'}" for k, v in acceptance.items()]  # fmt: skip
-    data = {"overall": overall, "acceptance": acceptance,
-            "runs": [r for p in policies for r in results[p]]}  # fmt: skip
+    lines += [
+        f"- {k}: {v['text']} — {'met' if v['met'] else 'NOT met'}" for k, v in acceptance.items()
+    ]
+    data = {
+        "overall": overall,
+        "acceptance": acceptance,
+        "runs": [r for p in policies for r in results[p]],
+    }
     return "\n".join(lines), data
 
 
@@ -108,16 +117,25 @@ def _acceptance(classical: list[dict], learned: list[dict]) -> dict[str, Any]:
 
     out: dict[str, Any] = {}
     ratio = mean(learned, "stopping_distance_m") / mean(classical, "stopping_distance_m")
-    out["mean stop"] = {"met": ratio <= 0.95, "value": ratio,
-                        "text": f"{100 * (ratio - 1):+.1f} % (target <= -5 %)"}  # fmt: skip
-    for key, label, worst in (("sliding_energy_kJ", "sliding energy", False),
-                              ("air_litres", "air", False), ("max_lock_s", "lock", True),
-                              ("max_sliding_kmh", "maximum sliding speed", True)):  # fmt: skip
+    out["mean stop"] = {
+        "met": ratio <= 0.95,
+        "value": ratio,
+        "text": f"{100 * (ratio - 1):+.1f} % (target <= -5 %)",
+    }
+    for key, label, worst in (
+        ("sliding_energy_kJ", "sliding energy", False),
+        ("air_litres", "air", False),
+        ("max_lock_s", "lock", True),
+        ("max_sliding_kmh", "maximum sliding speed", True),
+    ):
         a = max(r[key] for r in classical) if worst else mean(classical, key)
         b = max(r[key] for r in learned) if worst else mean(learned, key)
         what = "worst run" if worst else "mean"
-        out[label] = {"met": b <= a + 1e-9, "value": [b, a],
-                      "text": f"{what} {b:.2f} against {a:.2f}"}  # fmt: skip
+        out[label] = {
+            "met": b <= a + 1e-9,
+            "value": [b, a],
+            "text": f"{what} {b:.2f} against {a:.2f}",
+        }
     families = {}
     for fam in dict.fromkeys(_family(r["scenario"]) for r in classical):
         c = [r["stopping_distance_m"] for r in classical if _family(r["scenario"]) == fam]
@@ -146,24 +164,40 @@ def random_suite(n: int, vehicle: str = "uic_z1") -> SuiteConfig:
         patterns = list(rail.patterns)
         weights = np.array([rail.patterns[p] for p in patterns], dtype=float)
         pattern = patterns[int(rng.choice(len(patterns), p=weights / weights.sum()))]
-        cases.append({
-            "name": f"r{i:03d}_{name}", "rail": name, "mu_contaminated": float(rng.uniform(lo, hi)),
-            "pattern": pattern, "speeds_kmh": [f"{rng.uniform(40.0, v_max):.1f}"],
-            "load_factor": float(rng.uniform(0.85, 1.15)),
-            "demand": "emergency" if rng.uniform() < 0.7 else "service",
-            "gradient_permille": float(rng.uniform(-5.0, 5.0)),
-        })  # fmt: skip
-    return from_dict(SuiteConfig, {"name": "random", "description": "random draws",
-                                   "seeds": [RANDOM_SEED % 100000], "cases": cases})  # fmt: skip
+        cases.append(
+            {
+                "name": f"r{i:03d}_{name}",
+                "rail": name,
+                "mu_contaminated": float(rng.uniform(lo, hi)),
+                "pattern": pattern,
+                "speeds_kmh": [f"{rng.uniform(40.0, v_max):.1f}"],
+                "load_factor": float(rng.uniform(0.85, 1.15)),
+                "demand": "emergency" if rng.uniform() < 0.7 else "service",
+                "gradient_permille": float(rng.uniform(-5.0, 5.0)),
+            }
+        )
+    return from_dict(
+        SuiteConfig,
+        {
+            "name": "random",
+            "description": "random draws",
+            "seeds": [RANDOM_SEED % 100000],
+            "cases": cases,
+        },
+    )
 
 
 def random_table(learned: str, n: int) -> tuple[str, dict[str, Any]]:
     suite = random_suite(n)
-    res = {p: run_suite("uic_z1", suite, make_policy(p), record="none")[0]
-           for p in ("classical", learned)}  # fmt: skip
-    lines = ["| rail | scenarios | learned / classical stop: mean (min–max) | learned shorter | "
-             "sliding energy [kJ] learned / classical | air [l] learned / classical |",
-             "|---|---|---|---|---|---|"]  # fmt: skip
+    res = {
+        p: run_suite("uic_z1", suite, make_policy(p), record="none")[0]
+        for p in ("classical", learned)
+    }
+    lines = [
+        "| rail | scenarios | learned / classical stop: mean (min–max) | learned shorter | "
+        "sliding energy [kJ] learned / classical | air [l] learned / classical |",
+        "|---|---|---|---|---|---|",
+    ]
     by_rail: dict[str, list[int]] = {}
     for i, r in enumerate(res["classical"]):
         by_rail.setdefault(r["conditions"]["rail"], []).append(i)
@@ -172,15 +206,27 @@ def random_table(learned: str, n: int) -> tuple[str, dict[str, Any]]:
     for rail, idx in by_rail.items():
         c = [res["classical"][i] for i in idx]
         lr = [res[learned][i] for i in idx]
-        ratios = [b["stopping_distance_m"] / a["stopping_distance_m"] for a, b in zip(c, lr, strict=True)]  # fmt: skip
+        ratios = [
+            b["stopping_distance_m"] / a["stopping_distance_m"] for a, b in zip(c, lr, strict=True)
+        ]
         shorter = sum(x < 1.0 for x in ratios)
-        se = (statistics.fmean(r["sliding_energy_kJ"] for r in lr),
-              statistics.fmean(r["sliding_energy_kJ"] for r in c))  # fmt: skip
-        air = (statistics.fmean(r["air_litres"] for r in lr),
-               statistics.fmean(r["air_litres"] for r in c))  # fmt: skip
-        summary[rail] = {"n": len(idx), "ratio_mean": statistics.fmean(ratios),
-                         "ratio_min": min(ratios), "ratio_max": max(ratios), "shorter": shorter,
-                         "sliding_energy_kJ": se, "air_litres": air}  # fmt: skip
+        se = (
+            statistics.fmean(r["sliding_energy_kJ"] for r in lr),
+            statistics.fmean(r["sliding_energy_kJ"] for r in c),
+        )
+        air = (
+            statistics.fmean(r["air_litres"] for r in lr),
+            statistics.fmean(r["air_litres"] for r in c),
+        )
+        summary[rail] = {
+            "n": len(idx),
+            "ratio_mean": statistics.fmean(ratios),
+            "ratio_min": min(ratios),
+            "ratio_max": max(ratios),
+            "shorter": shorter,
+            "sliding_energy_kJ": se,
+            "air_litres": air,
+        }
         lines.append(
             f"| {rail} | {len(idx)} | {statistics.fmean(ratios):.3f} ({min(ratios):.3f}–"
             f"{max(ratios):.3f}) | {shorter}/{len(idx)} | {se[0]:.0f} / {se[1]:.0f} | "

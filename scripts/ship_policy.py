@@ -43,19 +43,34 @@ def learning_curve(run: Path, out_png: Path, title: str) -> None:
         pts = [(s, float(r[key])) for s, r in zip(steps, rows, strict=True) if r.get(key)]
         if pts:
             ax1.plot(*zip(*pts, strict=True), lw=0.8, label=key.split("/")[1].split("_")[0])
-    ax1.set(xlabel="timesteps [M]", ylabel="training episodes' mean stop [m]",
-            title="training (random scenarios, stochastic policy)")  # fmt: skip
+    ax1.set(
+        xlabel="timesteps [M]",
+        ylabel="training episodes' mean stop [m]",
+        title="training (random scenarios, stochastic policy)",
+    )
     ax1.legend(fontsize=8)
     hist = validation["history"]
     x = [h["timesteps"] / 1e6 for h in hist]
     ax2.plot(x, [h["mean_stopping_distance_m"] for h in hist], "o-", ms=3, label="policy")
-    ax2.axhline(validation["classical"]["mean_stopping_distance_m"], color="k", ls="--",
-                label="classical WSP")  # fmt: skip
+    ax2.axhline(
+        validation["classical"]["mean_stopping_distance_m"],
+        color="k",
+        ls="--",
+        label="classical WSP",
+    )
     best = validation["best"]
-    ax2.plot(best["timesteps"] / 1e6, best["mean_stopping_distance_m"], "r*", ms=12,
-             label=f"shipped ({best['timesteps'] / 1e6:.0f} M)")  # fmt: skip
-    ax2.set(xlabel="timesteps [M]", ylabel="mean stop [m]",
-            title=f"validation suite ({validation['classical']['runs']} runs, deterministic)")  # fmt: skip
+    ax2.plot(
+        best["timesteps"] / 1e6,
+        best["mean_stopping_distance_m"],
+        "r*",
+        ms=12,
+        label=f"shipped ({best['timesteps'] / 1e6:.0f} M)",
+    )
+    ax2.set(
+        xlabel="timesteps [M]",
+        ylabel="mean stop [m]",
+        title=f"validation suite ({validation['classical']['runs']} runs, deterministic)",
+    )
     ax2.legend(fontsize=8)
     fig.suptitle(title)
     fig.tight_layout()

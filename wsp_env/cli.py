@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from wsp_env.config import ConfigError, load_rail, load_vehicle
+from wsp_env.config import ConfigError, from_dict, load_rail, load_vehicle
 from wsp_env.trace_io import write_atomically
 
 
@@ -473,11 +473,103 @@ def _print_validate(result: dict[str, Any]) -> None:
         f"dry quiet {'pass' if dry['passed'] else 'FAIL'}  none {dry['none_m']:.1f} m, classical "
         f"{dry['classical_m']:.1f} m, air {dry['classical_air_l']:.1f} l"
     )
+    rig = result["rig"]
+    e_w = ", ".join(f"{x:.3f}" for x in rig["e_omega_rms_kmh"])
+    print(
+        f"rig       {'pass' if rig['passed'] else 'FAIL'}  seed 002 test on the rig "
+        f"{rig['rig_stopping_distance_m']:.1f} m, track {rig['track_stopping_distance_m']:.1f} m "
+        f"({rig['rig_vs_track_pct']:+.2f} %), e_omega RMS [{e_w}] km/h"
+    )
     if result.get("report"):
         print(f"wrote {result['report']}")
 
 
 # ---- entry point ----------------------------------------------------------------------------
+
+
+# ---- rig ------------------------------------------------------------------------------------
+
+
+def _add_rig(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "rig",
+        help="a braking test on the virtual roller rig (HIL, seed 002), against the track alone",
+        description="Runs a WSP (any policy evaluate runs) on a physical vehicle standing on a "
+        "full-scale roller rig whose rollers make its wheels feel the virtual track's degraded "
+        "adhesion (seed 002 §3: rig, estimator Eqs. 20-21, sliding-mode controller Eqs. 16-19), "
+        "and the same policy and scenario on the virtual track alone. See wsp_env/rig.py.",
+    )
+    p.add_argument("--vehicle", default="uic_z1", help="vehicle id or YAML path (uic_z1)")
+    p.add_argument(
+        "--policy", default="classical",
+        help="classical | none | oracle | a shipped policy's name | PATH.zip (classical); model "
+        "files are pickles: load only files you trust",
+    )  # fmt: skip
+    p.add_argument("--rail", default="soap", help="a rail of configs/rails.yaml (soap)")
+    p.add_argument("--speed-kmh", type=_positive, default=120.0, help="initial speed (120)")
+    p.add_argument("--mu-contaminated", type=_positive, default=None, help="fix the level")
+    p.add_argument(
+        "--pattern", choices=("uniform", "step_up", "step_down", "patches"), default=None
+    )
+    p.add_argument("--seed", type=int, default=0, help="draws what the case leaves open (0)")
+    p.add_argument("--rig-config", default=None, help="rig parameters (YAML, RigConfig fields)")
+    p.add_argument("--omega-noise-kmh", type=_nonneg, default=None, help="roller speed noise")
+    p.add_argument("--json", dest="json_path", default=None, help="write the result here")
+    p.add_argument("--plot", default=None, help="write seed 002 Figs. 18-22 style plots (PNG)")
+    p.set_defaults(func=cmd_rig)
+
+
+def cmd_rig(args: argparse.Namespace) -> dict[str, Any]:
+    from wsp_env.config import read_yaml
+    from wsp_env.policy import make_policy
+    from wsp_env.rig import RigConfig, plot_rig, rig_test
+
+    vehicle = load_vehicle(args.vehicle)
+    if args.speed_kmh > vehicle.max_speed_kmh:
+        raise UserError(
+            f"--speed-kmh: {args.speed_kmh:g} exceeds {vehicle.id}'s maximum "
+            f"{vehicle.max_speed_kmh:g} km/h"
+        )
+    load_rail(args.rail, None)  # an unknown rail fails here, named
+    rig_fields = (read_yaml(Path(args.rig_config)) or {}) if args.rig_config else {}
+    if args.omega_noise_kmh is not None:
+        rig_fields = {**rig_fields, "omega_noise_kmh": args.omega_noise_kmh}
+    where = args.rig_config or "--omega-noise-kmh"
+    try:
+        rig = from_dict(RigConfig, rig_fields, "")
+    except ConfigError as err:
+        raise ConfigError(f"{where}: {err}") from None
+    try:
+        policy = make_policy(args.policy)
+    except FileNotFoundError as err:
+        raise UserError(f"--policy: {err}") from None
+    case: dict[str, Any] = {}
+    if args.pattern is not None:
+        case["pattern"] = args.pattern
+    if args.mu_contaminated is not None:
+        case["mu_contaminated"] = args.mu_contaminated
+    result = rig_test(vehicle, policy, args.rail, args.speed_kmh, args.seed, case, rig)
+    if args.plot:
+        plot_rig(result, args.plot)
+    return result.summary
+
+
+def _print_rig(result: dict[str, Any]) -> None:
+    def row(values: list[float], fmt: str) -> str:
+        return " ".join(format(v, fmt) for v in values)
+
+    print(
+        f"{result['policy']} on the rig, {result['vehicle']}, {result['rail']} from "
+        f"{result['speed_kmh']:g} km/h: stop {result['rig_stopping_distance_m']:.1f} m on the "
+        f"rig, {result['track_stopping_distance_m']:.1f} m on the track alone "
+        f"({result['rig_vs_track_pct']:+.2f} %)"
+    )
+    print(f"  e_omega RMS [km/h]  {row(result['e_omega_rms_kmh'], '.3f')}")
+    print(f"  e_omega max [km/h]  {row(result['e_omega_max_kmh'], '.3f')}")
+    print(f"  e_C RMS [N m]       {row(result['e_C_rms_Nm'], '.0f')}")
+    print(f"  mean sliding [km/h] {row(result['mean_sliding_kmh'], '.2f')} (rig), "
+          f"{row(result['track_mean_sliding_kmh'], '.2f')} (track)")  # fmt: skip
+    print(f"  {result['wall_time_s']:.1f} s wall, {result['real_time_factor']:.0f}x real time")
 
 
 # ---- export-policy ----------------------------------------------------------------------------
@@ -524,6 +616,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_train(sub)
     _add_validate(sub)
     _add_export(sub)
+    _add_rig(sub)
     return parser
 
 
@@ -535,6 +628,7 @@ PRINTERS = {
     "train": _print_train,
     "validate": _print_validate,
     "export-policy": _print_export,
+    "rig": _print_rig,
 }
 
 

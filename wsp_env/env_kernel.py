@@ -103,6 +103,22 @@ def _clip(x):
     return min(OBS_CLIP, max(-OBS_CLIP, x))
 
 
+@njit(**INLINE_FLAGS)
+def update_reference(e, wsp, fastest, train_decel, env_par, obs_par, ctrl_dt):
+    """The WSP's reference speed after one period: the fastest wheel, falling at most at the
+    deceleration limit, or with a body accelerometer at the deceleration it reads
+    (``train_decel`` as a specific force: the gradient's ``g sin(theta)`` is not seen, plus the
+    sensor's bias), as accelerometer-aided WSPs do; rising at most at the rise limit."""
+    v_ref = wsp[e, W_VREF]
+    if obs_par[OP_ACCELEROMETER] > 0.0:
+        a_read = train_decel - env_par[e, EP_GRADE_ACC] + wsp[e, W_ACC_BIAS]
+        wsp[e, W_ACC] = a_read
+        v_ref = max(fastest, v_ref - max(a_read, 0.0) * ctrl_dt)
+    else:
+        v_ref = max(fastest, v_ref - obs_par[OP_REF_DECEL_LIMIT] * ctrl_dt)
+    wsp[e, W_VREF] = min(v_ref, wsp[e, W_VREF] + obs_par[OP_REF_RISE_LIMIT] * ctrl_dt)
+
+
 @njit(**KERNEL_FLAGS)
 def write_obs(
     e, env_par, axle_par, env_state, axle_state, wsp, prev_wheel, prev_action, obs_par, ctrl_dt, obs
@@ -249,22 +265,12 @@ def _env_step_one(
         env_acc,
         axle_acc,
     )
-    # --- WSP reference speed: the fastest wheel, falling at most at the deceleration limit, or
-    # with a body accelerometer at the deceleration it reads (specific force: the gradient's
-    # g sin(theta) is not seen, plus the sensor's bias), as accelerometer-aided WSPs do --------
-    v_ref = wsp[e, W_VREF]
+    # --- WSP reference speed (``update_reference``) -----------------------------------------
     fastest = 0.0
     for k in range(n_axles):
         fastest = max(fastest, axle_state[e, k, AS_OMEGA] * axle_par[e, k, AP_RADIUS])
-    if obs_par[OP_ACCELEROMETER] > 0.0:
-        a_read = (v0 - env_state[e, ES_V]) / ctrl_dt - env_par[e, EP_GRADE_ACC]
-        a_read += wsp[e, W_ACC_BIAS]
-        wsp[e, W_ACC] = a_read
-        v_ref = max(fastest, v_ref - max(a_read, 0.0) * ctrl_dt)
-    else:
-        v_ref = max(fastest, v_ref - obs_par[OP_REF_DECEL_LIMIT] * ctrl_dt)
-    v_ref = min(v_ref, wsp[e, W_VREF] + obs_par[OP_REF_RISE_LIMIT] * ctrl_dt)
-    wsp[e, W_VREF] = v_ref
+    train_decel = (v0 - env_state[e, ES_V]) / ctrl_dt
+    update_reference(e, wsp, fastest, train_decel, env_par, obs_par, ctrl_dt)
     # --- reward terms (costs in metres of stopping distance) -------------------------------------
     v = env_state[e, ES_V]
     locked = 0.0

@@ -24,6 +24,11 @@ The adhesion model must hold these together (DESIGN §3); each has a pass flag:
   is listed but not judged: it holds no locked wheel to compare.
 * ``dry_quiet`` — on dry rail (and on wet rail whose adhesion exceeds the demand) the classical
   WSP vents no air and stops within 1 % of ``none``.
+* ``rig`` — seed 002's braking test (the test vehicle's WSP, nominal pads) on the virtual roller
+  rig (``rig.py``, seed 002 §3) and on the virtual track alone: the rig reproduces the track's
+  stop within ``RIG_STOP_TOL`` (1 %), and the speed error ``e_omega`` (seed 002 §5.2.2, Fig. 18)
+  has an RMS below ``RIG_E_OMEGA_RMS_KMH`` on every axle (0.5 km/h: under 4 % of the test's
+  13 km/h mean sliding, Table 6). The torque estimation error is reported.
 """
 
 from __future__ import annotations
@@ -57,6 +62,8 @@ SEED000_SPEED_KMH = 150.0
 SEED000_SAMPLE_S = 0.1
 SEED000_SPEED_NOISE_KMH = 0.05
 DRY_QUIET_TOL = 0.01
+RIG_STOP_TOL = 0.01
+RIG_E_OMEGA_RMS_KMH = 0.5
 
 
 def seed002_check() -> dict[str, Any]:
@@ -195,6 +202,28 @@ def dry_quiet_check() -> dict[str, Any]:
     return {**rows[0], "runs": rows, "passed": passed}
 
 
+def rig_check() -> dict[str, Any]:
+    """Seed 002's braking test on the roller rig against the track alone (module docstring)."""
+    from wsp_env.baselines.classical import ClassicalWSP, load_wsp_config
+    from wsp_env.evaluation import load_suite
+    from wsp_env.rig import rig_test
+
+    (case,) = load_suite("seed002_braking").cases
+    wsp = load_wsp_config(_configs_root() / "wsp" / "seed002_uic_z1.yaml")
+    fixed = {"mu_contaminated": case.mu_contaminated, "pattern": case.pattern,
+             "load": case.load, "gradient_permille": case.gradient_permille}  # fmt: skip
+    result = rig_test("uic_z1", ClassicalWSP(wsp), case.rail, float(case.speeds_kmh[0]), 0, fixed)
+    s = result.summary
+    passed = (
+        abs(s["rig_vs_track_pct"]) <= 100.0 * RIG_STOP_TOL
+        and max(s["e_omega_rms_kmh"]) <= RIG_E_OMEGA_RMS_KMH
+    )
+    keys = ("e_omega_rms_kmh", "e_omega_max_kmh", "e_C_rms_Nm", "e_C_max_Nm",
+            "rig_stopping_distance_m", "track_stopping_distance_m", "rig_vs_track_pct",
+            "mean_sliding_kmh", "track_mean_sliding_kmh", "real_time_factor")  # fmt: skip
+    return {**{k: s[k] for k in keys}, "passed": bool(passed), "_result": result}
+
+
 def run_validation(report: str | Path | None = None) -> dict[str, Any]:
     """Every check; the JSON-ready result (``passed`` per check and overall)."""
     with tempfile.TemporaryDirectory() as tmp:
@@ -203,6 +232,7 @@ def run_validation(report: str | Path | None = None) -> dict[str, Any]:
             "seed000": seed000_check(Path(tmp)),
             "locked_vs_wsp": locked_vs_wsp_check(),
             "dry_quiet": dry_quiet_check(),
+            "rig": rig_check(),
         }
     if report is not None:
         from wsp_env.validate_report import write_validation_report
@@ -214,7 +244,7 @@ def run_validation(report: str | Path | None = None) -> dict[str, Any]:
     out["locked_vs_wsp_passed"] = locked["passed"]
     out["passed"] = all(
         (out["seed002"]["passed"], out["seed000"]["passed"], locked["passed"],
-         out["dry_quiet"]["passed"])
+         out["dry_quiet"]["passed"], out["rig"]["passed"])
     )  # fmt: skip
     return out
 

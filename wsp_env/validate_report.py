@@ -143,4 +143,27 @@ def _build(out: Path, result: dict[str, Any]) -> None:
             f"| {r['scenario']} | {r['none_m']:.1f} | {r['classical_m']:.1f} | "
             f"{r['classical_air_l']:.1f} |"
         )
+    rig = result["rig"]
+    lines += [
+        "",
+        f"## Seed 002's test on the roller rig (HIL, §3, §5.2.2): {_flag(rig['passed'])}",
+        "",
+        f"Rig {rig['rig_stopping_distance_m']:.1f} m, track alone "
+        f"{rig['track_stopping_distance_m']:.1f} m ({rig['rig_vs_track_pct']:+.2f} %, limit "
+        "1 %); e_omega RMS under 0.5 km/h on every axle.",
+        "",
+        "| axle | e_omega RMS / max [km/h] | e_C RMS / max [N m] | mean sliding rig / track "
+        "[km/h] |",
+        "|---|---|---|---|",
+    ]
+    for i in range(len(rig["e_omega_rms_kmh"])):
+        lines.append(
+            f"| {i + 1} | {rig['e_omega_rms_kmh'][i]:.3f} / {rig['e_omega_max_kmh'][i]:.3f} | "
+            f"{rig['e_C_rms_Nm'][i]:.0f} / {rig['e_C_max_Nm'][i]:.0f} | "
+            f"{rig['mean_sliding_kmh'][i]:.2f} / {rig['track_mean_sliding_kmh'][i]:.2f} |"
+        )
+    from wsp_env.rig import plot_rig
+
+    plot_rig(rig["_result"], str(plots / "rig.png"))
+    lines += ["", "![rig](plots/rig.png)", ""]
     (out / "report.md").write_text("\n".join(lines) + "\n")

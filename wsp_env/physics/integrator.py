@@ -72,6 +72,7 @@ from wsp_env.physics.layout import (
     AS_CMD,
     AS_CONT,
     AS_DOMEGA,
+    AS_EXT_TORQUE,
     AS_F,
     AS_INV_STIFF,
     AS_KW,
@@ -93,6 +94,7 @@ from wsp_env.physics.layout import (
     EP_DAVIS_B,
     EP_DAVIS_C,
     EP_E_CLEAN,
+    EP_EXT_TORQUE,
     EP_EXTRA_BRAKE_N,
     EP_FILL_DECAY,
     EP_FILL_RATE,
@@ -213,6 +215,7 @@ def _step_env(
     inv_dt = 1.0 / dt
     v_eps = env_par[e, EP_V_EPS]
     grade = mass * env_par[e, EP_GRADE_ACC]
+    external = env_par[e, EP_EXT_TORQUE] > 0.0
     # Once per control period: the quasi-static normal load (load transfer from the
     # deceleration, 20 ms behind it, far quicker than body pitch) and the Hertz/Kalker
     # stiffness that goes with it (~ N^(2/3)).
@@ -245,24 +248,27 @@ def _step_env(
         use_prev = j * dt < dead
         force_sum = 0.0
         for k in range(n_axles):
-            # --- pneumatics: valve command -> cylinder pressure ------------------------------
-            u = axle_state[e, k, AS_CMD] if use_prev else cmd[e, k]
-            p = axle_state[e, k, AS_P]
-            if u < 0.0:
-                target = min(p, p_d)
+            if external:  # torques from outside (a roller rig's estimates, a traction drive)
+                torque = -axle_state[e, k, AS_EXT_TORQUE]
             else:
-                target = min(u, 1.0) * p_d
-            axle_state[e, k, AS_VENTING] = 1.0 if target < p - VENT_MARGIN_BAR else 0.0
-            if target > p:
-                p_new = min(target + (p - target) * fill_decay, p + fill_step)
-            else:
-                p_new = max(target + (p - target) * vent_decay, p - vent_step)
-            if p_new < p:
-                axle_acc[e, k, AA_AIR_L] += (
-                    axle_par[e, k, AP_CYL_VOLUME_L] * (p - p_new) * INV_P_ATM
-                )
-            axle_state[e, k, AS_P] = p_new
-            torque = brake_torque(axle_par, e, k, p_new, pad)
+                # --- pneumatics: valve command -> cylinder pressure --------------------------
+                u = axle_state[e, k, AS_CMD] if use_prev else cmd[e, k]
+                p = axle_state[e, k, AS_P]
+                if u < 0.0:
+                    target = min(p, p_d)
+                else:
+                    target = min(u, 1.0) * p_d
+                axle_state[e, k, AS_VENTING] = 1.0 if target < p - VENT_MARGIN_BAR else 0.0
+                if target > p:
+                    p_new = min(target + (p - target) * fill_decay, p + fill_step)
+                else:
+                    p_new = max(target + (p - target) * vent_decay, p - vent_step)
+                if p_new < p:
+                    axle_acc[e, k, AA_AIR_L] += (
+                        axle_par[e, k, AP_CYL_VOLUME_L] * (p - p_new) * INV_P_ATM
+                    )
+                axle_state[e, k, AS_P] = p_new
+                torque = brake_torque(axle_par, e, k, p_new, pad)
             # --- contact: rail under the axle -----------------------------------------------
             normal = axle_state[e, k, AS_N]
             k_n = axle_state[e, k, AS_STIFF]

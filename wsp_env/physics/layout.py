@@ -58,7 +58,10 @@ EP_EXTRA_BRAKE_N = 40  # N at full demand: a brake force not through the wheels 
 EP_SLIDE_THRESH = 41  # m/s: a wheel slides (metrics: time and longest spell) when V - v_i
 EP_SLIDE_REL = 42  # exceeds max(EP_SLIDE_THRESH, EP_SLIDE_REL V)
 EP_STIFF_FACTOR = 43  # creep stiffness of the contaminated contact / Kalker's (rail.py)
-N_EP = 44
+# 1.0: the wheel torques are given from outside (AS_EXT_TORQUE: the roller rig's estimated
+# torques, a traction drive) instead of the pneumatic brakes; 0.0: the brakes (default)
+EP_EXT_TORQUE = 44
+N_EP = 45
 
 # ---- per-axle parameters ---------------------------------------------------------------------
 AP_RADIUS = 0  # m, rolling radius
@@ -103,7 +106,8 @@ AS_CELL = 13  # index of the rail cell under the axle; AS_CONT is read once on e
 AS_STIFF = 14  # Kalker stiffness / normal load at the current load (once per control period)
 AS_VENTING = 15  # 1.0 while the valve vents (last substep)
 AS_INV_STIFF = 16  # normal load / Kalker stiffness
-N_AS = 17
+AS_EXT_TORQUE = 17  # N m on the wheelset with EP_EXT_TORQUE: > 0 drives (traction), < 0 brakes
+N_AS = 18
 
 NO_CELL = -1.0e18  # AS_CELL before the first substep
 
