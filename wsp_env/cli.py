@@ -480,6 +480,15 @@ def _print_validate(result: dict[str, Any]) -> None:
         f"{rig['rig_stopping_distance_m']:.1f} m, track {rig['track_stopping_distance_m']:.1f} m "
         f"({rig['rig_vs_track_pct']:+.2f} %), e_omega RMS [{e_w}] km/h"
     )
+    tr = result["seed002_traction"]
+    slide = ", ".join(f"{x:.2f}" for x in tr["mean_sliding_kmh"])
+    note = "" if tr["in_overall_verdict"] else " (open: not in the overall verdict yet)"
+    print(
+        f"traction  {'pass' if tr['passed'] else 'FAIL'}  seed 002 E402B start: mean sliding "
+        f"[{slide}] km/h (Table 9 +-0.5 inside: {tr['mean_sliding_inside']}, axle 4 least: "
+        f"{tr['axle4_least_sliding']}), {tr['distance_m']:.1f} m in {tr['duration_s']:g} s "
+        f"(Table 10 159.6-225.6 m){note}"
+    )
     if result.get("report"):
         print(f"wrote {result['report']}")
 
@@ -572,6 +581,61 @@ def _print_rig(result: dict[str, Any]) -> None:
     print(f"  {result['wall_time_s']:.1f} s wall, {result['real_time_factor']:.0f}x real time")
 
 
+# ---- traction -------------------------------------------------------------------------------
+
+
+def _add_traction(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "traction",
+        help="a start on a contaminated rail with the anti-skid device (seed 002 traction test)",
+        description="The traction phase (seed 002 §3.1.4, §5.3): the driver's torque per axle, "
+        "modulated by the anti-skid device, on soap at Table 8's levels; defaults are the "
+        "E402B test of Table 3. See wsp_env/traction.py.",
+    )
+    p.add_argument("--vehicle", default="e402b", help="vehicle id or YAML path (e402b)")
+    p.add_argument("--speed-kmh", type=_positive, default=5.0, help="initial speed (5)")
+    p.add_argument("--torque-nm", type=_positive, default=12300.0, help="per axle (12300)")
+    p.add_argument("--duration-s", type=_positive, default=20.0, help="test duration (20)")
+    p.add_argument("--mu-contaminated", type=_positive, default=0.09, help="level (0.09)")
+    p.add_argument("--antiskid-config", default=None, help="anti-skid thresholds (YAML)")
+    p.add_argument("--no-antiskid", action="store_true", help="the full torque throughout")
+    p.add_argument("--json", dest="json_path", default=None, help="write the result here")
+    p.add_argument("--plot", default=None, help="write a PNG of speeds, torques, adhesion")
+    p.set_defaults(func=cmd_traction)
+
+
+def cmd_traction(args: argparse.Namespace) -> dict[str, Any]:
+    from wsp_env.baselines.antiskid import AntiSkid, AntiSkidConfig
+    from wsp_env.config import read_yaml
+    from wsp_env.traction import plot_traction, run_traction
+
+    vehicle = load_vehicle(args.vehicle)
+    antiskid = None
+    if args.antiskid_config:
+        try:
+            cfg = from_dict(AntiSkidConfig, read_yaml(Path(args.antiskid_config)) or {}, "")
+        except ConfigError as err:
+            raise ConfigError(f"{args.antiskid_config}: {err}") from None
+        antiskid = AntiSkid(cfg)
+    run = run_traction(
+        vehicle, args.torque_nm, args.speed_kmh, args.duration_s,
+        mu_contaminated=args.mu_contaminated, antiskid=antiskid, no_antiskid=args.no_antiskid,
+    )  # fmt: skip
+    if args.plot:
+        plot_traction(run, args.plot)
+    return run.summary
+
+
+def _print_traction(result: dict[str, Any]) -> None:
+    slide = " ".join(f"{x:.2f}" for x in result["mean_sliding_kmh"])
+    print(
+        f"{result['vehicle']} from {result['speed_kmh']:g} km/h, {result['torque_Nm']:g} N m per "
+        f"axle, {'with' if result['antiskid'] else 'without'} anti-skid: "
+        f"{result['distance_m']:.1f} m in {result['duration_s']:.1f} s, "
+        f"{result['final_speed_kmh']:.1f} km/h; mean sliding [{slide}] km/h"
+    )
+
+
 # ---- export-policy ----------------------------------------------------------------------------
 
 
@@ -617,6 +681,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_validate(sub)
     _add_export(sub)
     _add_rig(sub)
+    _add_traction(sub)
     return parser
 
 
@@ -629,6 +694,7 @@ PRINTERS = {
     "validate": _print_validate,
     "export-policy": _print_export,
     "rig": _print_rig,
+    "traction": _print_traction,
 }
 
 

@@ -29,6 +29,12 @@ The adhesion model must hold these together (DESIGN §3); each has a pass flag:
   stop within ``RIG_STOP_TOL`` (1 %), and the speed error ``e_omega`` (seed 002 §5.2.2, Fig. 18)
   has an RMS below ``RIG_E_OMEGA_RMS_KMH`` on every axle (0.5 km/h: under 4 % of the test's
   13 km/h mean sliding, Table 6). The torque estimation error is reported.
+* ``seed002_traction`` — seed 002's traction test (E402B from 5 km/h, 12,300 N m per axle,
+  Table 8's soap, the default anti-skid device, 20 s: ``traction.py``): each axle's mean sliding
+  inside Table 9's T1-T2 envelope widened by 0.5 km/h, axle 4 the least sliding, and the
+  distance inside Table 10's T2-T1 span. Reported with its pass flag but **not yet part of the
+  overall verdict** (``OPEN_CHECKS``): axles 2 and 3 slide 0.2-0.3 km/h against Table 9's
+  1.0-1.5 (README "Traction"), an open finding of issue 12.
 """
 
 from __future__ import annotations
@@ -62,6 +68,7 @@ SEED000_SPEED_KMH = 150.0
 SEED000_SAMPLE_S = 0.1
 SEED000_SPEED_NOISE_KMH = 0.05
 DRY_QUIET_TOL = 0.01
+OPEN_CHECKS = ("seed002_traction",)  # reported, not yet in the overall verdict (docstring)
 RIG_STOP_TOL = 0.01
 RIG_E_OMEGA_RMS_KMH = 0.5
 
@@ -224,6 +231,12 @@ def rig_check() -> dict[str, Any]:
     return {**{k: s[k] for k in keys}, "passed": bool(passed), "_result": result}
 
 
+def _traction_check() -> dict[str, Any]:
+    from wsp_env.traction import seed002_traction_check
+
+    return {**seed002_traction_check(), "in_overall_verdict": "seed002_traction" not in OPEN_CHECKS}
+
+
 def run_validation(report: str | Path | None = None) -> dict[str, Any]:
     """Every check; the JSON-ready result (``passed`` per check and overall)."""
     with tempfile.TemporaryDirectory() as tmp:
@@ -233,6 +246,7 @@ def run_validation(report: str | Path | None = None) -> dict[str, Any]:
             "locked_vs_wsp": locked_vs_wsp_check(),
             "dry_quiet": dry_quiet_check(),
             "rig": rig_check(),
+            "seed002_traction": _traction_check(),
         }
     if report is not None:
         from wsp_env.validate_report import write_validation_report

@@ -166,4 +166,29 @@ def _build(out: Path, result: dict[str, Any]) -> None:
 
     plot_rig(rig["_result"], str(plots / "rig.png"))
     lines += ["", "![rig](plots/rig.png)", ""]
+    tr = result["seed002_traction"]
+    open_note = "" if tr["in_overall_verdict"] else " (open: not yet in the overall verdict)"
+    lines += [
+        "",
+        f"## Seed 002 traction test (Tables 9-10): {_flag(tr['passed'])}{open_note}",
+        "",
+        f"E402B from 5 km/h, 12,300 N m per axle, {tr['duration_s']:g} s: "
+        f"{tr['distance_m']:.1f} m (Table 10: 159.64-225.57 m; at 18 / 22 s "
+        f"{tr['distance_at_18_22_s_m'][0]:.1f} / {tr['distance_at_18_22_s_m'][1]:.1f} m).",
+        "",
+        "| axle | mean sliding [km/h] | Table 9 T1 / T2 | envelope (+-0.5) | std [km/h] |",
+        "|---|---|---|---|---|",
+    ]
+    from wsp_env.traction import TABLE9_KMH, plot_traction
+
+    lo, hi = tr["table9_envelope_kmh"]
+    for i, m in enumerate(tr["mean_sliding_kmh"]):
+        lines.append(
+            f"| {i + 1} | {m:.2f} | {TABLE9_KMH[0, i]:.2f} / {TABLE9_KMH[1, i]:.2f} | "
+            f"{lo[i]:.2f} to {hi[i]:.2f} | {tr['std_sliding_kmh'][i]:.2f} |"
+        )
+    from wsp_env.traction import TractionRun
+
+    plot_traction(TractionRun(summary={}, record=tr["_record"]), str(plots / "traction.png"))
+    lines += ["", "![traction](plots/traction.png)", ""]
     (out / "report.md").write_text("\n".join(lines) + "\n")
