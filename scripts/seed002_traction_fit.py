@@ -12,9 +12,9 @@ envelope widened by 0.5 km/h, for axle 4 not being the least sliding and for a 2
 outside Table 10's T2-T1 span. About 0.2 s per candidate on one core.
 
 Finding (``--n 150 --seed 0``, 2026-11-23): no setting brings axles 2 and 3 near Table 9 (best:
-mean sliding -1.73 / -0.19 / -0.29 / -0.17 km/h, 190.6 m): their adhesion exceeds the torque's
-demand (load transfer, and the rail axle 1 cleaned), so they never reach the device's
-thresholds. No fitted configuration is shipped; the gap is in the physics (README "Traction").
+mean sliding -1.73 / -0.19 / -0.29 / -0.17 km/h, 190.6 m): axles 2-3 run just below the soap
+curve's peak (~1 % creep) and never slip enough to reach the device's thresholds. No fitted
+configuration is shipped; the gap is in the physics (README "Traction").
 """
 
 from __future__ import annotations

@@ -34,7 +34,8 @@ The adhesion model must hold these together (DESIGN §3); each has a pass flag:
   inside Table 9's T1-T2 envelope widened by 0.5 km/h, axle 4 the least sliding, and the
   distance inside Table 10's T2-T1 span. Reported with its pass flag but **not yet part of the
   overall verdict** (``OPEN_CHECKS``): axles 2 and 3 slide 0.2-0.3 km/h against Table 9's
-  1.0-1.5 (README "Traction"), an open finding of issue 12.
+  1.0-1.5 — they run just below the soap curve's peak (~1 % creep) and the anti-skid never acts
+  (README "Traction"), an open finding of issue 12.
 """
 
 from __future__ import annotations
