@@ -101,6 +101,7 @@ class TrainConfig:
     eval: EvalConfig = field(default_factory=EvalConfig)
     checkpoint_every_timesteps: int = 1_000_000
     source: str = ""  # the file it came from (for messages)
+    pretrain: Any = None  # imitation.PretrainConfig: a warm start before learning (fresh runs)
 
     def as_yaml_dict(self) -> dict[str, Any]:
         """The config as a file would hold it (what ``config.yaml`` in a run folder keeps)."""
@@ -114,6 +115,8 @@ class TrainConfig:
         out["env_kwargs"] = self.env_kwargs
         out["eval"] = dataclasses.asdict(self.eval)
         out["checkpoint_every_timesteps"] = self.checkpoint_every_timesteps
+        if self.pretrain is not None:
+            out["pretrain"] = dataclasses.asdict(self.pretrain)
         return out
 
 
@@ -251,6 +254,19 @@ def parse_train_config(data: Any, source: str = "") -> TrainConfig:
         if k not in ENV_KWARGS:
             raise ConfigError(f"env_kwargs.{k}: unknown (allowed: {', '.join(ENV_KWARGS)})")
     eval_cfg = from_dict(EvalConfig, data.pop("eval", {}) or {}, "eval")
+    pretrain_cfg = None
+    if data.get("pretrain") is not None:
+        from wsp_env.imitation import PretrainConfig
+
+        pretrain_cfg = from_dict(PretrainConfig, data.pop("pretrain"), "pretrain")
+        if algo not in ("ppo", "a2c"):
+            raise ConfigError(
+                f"pretrain: a warm start of the actor-critic of ppo or a2c, not {algo}"
+            )
+        if env_kwargs.get("action_mode", "continuous") != "continuous":
+            raise ConfigError("pretrain: needs env_kwargs.action_mode continuous (the teacher's "
+                              "actions are valve fractions)")  # fmt: skip
+    data.pop("pretrain", None)
     every = _int(data.pop("checkpoint_every_timesteps", 1_000_000), "checkpoint_every_timesteps")
     try:
         cls = _algo_class(algo)
@@ -266,7 +282,8 @@ def parse_train_config(data: Any, source: str = "") -> TrainConfig:
         _check_hyperparameter(k, v, params[k].default)
         hyper[k] = v
     cfg = TrainConfig(algo, n_timesteps, policy, n_envs, frame_stack, seed, normalize,
-                      policy_kwargs, hyper, env_kwargs, eval_cfg, every, source)  # fmt: skip
+                      policy_kwargs, hyper, env_kwargs, eval_cfg, every, source,
+                      pretrain_cfg)  # fmt: skip
     check_env_kwargs(cfg.env_kwargs)
     reward = cfg.env_kwargs.get("reward") or {}
     if isinstance(reward, dict) and float(reward.get("shaping_decel_mps2", 0.0) or 0.0) > 0.0:
@@ -680,7 +697,16 @@ def train(
         random.setstate(state["python_rng"])
         if state.get("action_space_rng") is not None:
             model.action_space.np_random.bit_generator.state = state["action_space_rng"]
+    pretrained = None
     try:
+        if resume is None and cfg.pretrain is not None:
+            from wsp_env.cli import write_json
+            from wsp_env.imitation import pretrain
+
+            gamma = float(cfg.hyperparams.get("gamma", 0.99))
+            pretrained = pretrain(model, env, _braking_core(venv), cfg.pretrain, gamma)
+            pretrained["validation"] = validator.evaluate(model)  # the warm start, at step 0
+            write_json(out / "pretrain.json", pretrained)
         formats = ["csv"] + (["tensorboard"] if _have_tensorboard() else [])
         model.set_logger(configure(str(out / "logs" / f"from_step_{start}"), formats))
         callbacks = _callbacks(cfg, out, total, progress, {"start": start, "validator": validator})
@@ -713,6 +739,8 @@ def train(
             "classical_validation": validator.classical,
             "validation_suite": validator.suite.name,
         }
+        if pretrained is not None:
+            result["pretrain_env_steps"] = pretrained["env_steps"]
         from wsp_env.cli import write_json
 
         write_json(out / "train.json", result)
