@@ -22,6 +22,9 @@ demo: $(STAMP)
 		--report runs/demo/calibration --export runs/demo/calibrated.yaml
 	$(BIN)/wsp-env evaluate --policy classical --policy none --policy oracle --suite quick \
 		--json runs/demo/evaluate.json --report runs/demo/report
+	$(BIN)/wsp-env rig --policy classical --rail soap --mu-contaminated 0.08 --pattern uniform \
+		--speed-kmh 120 --json runs/demo/rig.json --plot runs/demo/rig.png
+	$(BIN)/wsp-env traction --json runs/demo/traction.json --plot runs/demo/traction.png
 	$(BIN)/wsp-env validate --json runs/demo/validate.json --report runs/demo/validate
 
 test: $(STAMP)
