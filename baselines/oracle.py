@@ -120,6 +120,42 @@ class SlipTracker:
         return np.clip(2.0 * frac - 1.0, -1.0, 1.0).astype(np.float32)
 
 
+class RailAwareTracker:
+    """A privileged teacher for imitation (``wsp_env/imitation.py``): where the rail's adhesion
+    recovers under sliding (soap: seed 002 Eqs. 9-14) it holds every axle at a constant sliding
+    speed (``slide_kmh``: the slide pays, it lifts the adhesion) down to
+    ``min_slide_speed_kmh``, elsewhere (leaves, oil, wet, and the last metres) at the peak of the
+    current curve. Chosen on the ``validation`` suite (single targets per
+    rail: on soap 3-5 km/h stop 3-10 % shorter than the classical WSP and peak tracking 6-12 %
+    longer; on leaves and oil peak tracking 15-40 % shorter); never on a judging suite."""
+
+    name = "oracle_rail"
+    privileged = True
+
+    def __init__(
+        self, slide_kmh: float = 4.0, min_slide_speed_kmh: float = 25.0, feedback_gain: float = 2.0
+    ) -> None:
+        self.min_speed = min_slide_speed_kmh / 3.6  # below it a 4 km/h slide is nearly a lock
+        self.peak = SlipTracker(None, feedback_gain)
+        self.slide = SlipTracker((0.0, slide_kmh), feedback_gain)
+
+    def bind(self, core: Any) -> None:
+        self.core = core
+        self.peak.bind(core)
+        self.slide.bind(core)
+
+    def reset(self, env_ids: np.ndarray) -> None:
+        pass
+
+    def act(self, obs: np.ndarray) -> np.ndarray:
+        sim = self.core.sim
+        recovers = (sim.env_par[:, L.EP_W_MAX] > sim.env_par[:, L.EP_W_LIM]) & (
+            sim.env_par[:, L.EP_W_LIM] < 1e300
+        )
+        recovers &= sim.env_state[:, L.ES_V] > self.min_speed
+        return np.where(recovers[:, None], self.slide.act(obs), self.peak.act(obs))
+
+
 class Oracle:
     """The sweep of ``SlipTracker`` targets, best per run (module docstring)."""
 

@@ -94,3 +94,22 @@ def test_bad_pretrain_block_is_one_line(tmp_path, capsys, changes, field):
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and f"{field}" in err, err
     assert not (tmp_path / "o").exists()
+
+
+def test_rail_aware_teacher_slides_where_the_rail_recovers():
+    """oracle_rail: a ~4 km/h slide on soap (recovering) above 25 km/h, the curve's peak on
+    leaves (no recovery: there a slide buys nothing): the soap axles slide several times
+    deeper than the leaves axles."""
+    from wsp_env.baselines.oracle import RailAwareTracker
+    from wsp_env.evaluation import CaseConfig, SuiteConfig, run_suite
+
+    cases = tuple(
+        CaseConfig(name=r, rail=r, mu_contaminated=m, pattern="uniform", speeds_kmh=("80",))
+        for r, m in (("soap", 0.08), ("leaves", 0.05))
+    )
+    suite = SuiteConfig(name="t", description="", seeds=(3,), cases=cases)
+    (soap, leaves), _ = run_suite("uic_z1", suite, RailAwareTracker(), record="none")
+    soap_slide = np.mean([a["mean_sliding_kmh"] for a in soap["axles"]])
+    leaves_slide = np.mean([a["mean_sliding_kmh"] for a in leaves["axles"]])
+    assert 1.5 < soap_slide < 5.0 and leaves_slide < 0.5 * soap_slide
+    assert soap["max_lock_s"] == 0.0 and leaves["max_lock_s"] == 0.0

@@ -2,7 +2,8 @@
 own (non-privileged) observations, DAgger-style, before reinforcement learning starts.
 
 The teacher sees what no WSP measures (``baselines/oracle.py``: ``oracle_peak`` holds every axle
-at the peak of its current adhesion curve from the simulator's true state); the student sees the
+at the peak of its current adhesion curve from the simulator's true state, ``oracle_rail`` does
+that where the rail does not recover and holds a 4 km/h slide where it does); the student sees the
 observation the environment gives it (wheel speeds, decelerations, pressures, the reference
 speed, an accelerometer if configured), normalised and frame-stacked exactly as the learner
 will see it. Rounds (Ross, Gordon & Bagnell 2011, DAgger): in round 0 the teacher drives; in
@@ -21,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-TEACHERS = ("oracle_peak", "classical")
+TEACHERS = ("oracle_peak", "oracle_rail", "classical")
 
 
 @dataclass(frozen=True)
@@ -43,6 +44,10 @@ def make_teacher(name: str) -> Any:
         from wsp_env.baselines.oracle import SlipTracker
 
         return SlipTracker(None)
+    if name == "oracle_rail":
+        from wsp_env.baselines.oracle import RailAwareTracker
+
+        return RailAwareTracker()
     from wsp_env.baselines.classical import ClassicalWSP, load_wsp_config
 
     return ClassicalWSP(load_wsp_config())
