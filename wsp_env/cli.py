@@ -49,6 +49,27 @@ def _json_default(obj: Any) -> Any:
     raise TypeError(f"not JSON serialisable: {type(obj).__name__}")
 
 
+def _vehicle_for_speed(vehicle_id: str, speed_kmh: float) -> Any:
+    """The vehicle, refusing an initial speed above its maximum (one line)."""
+    vehicle = load_vehicle(vehicle_id)
+    if speed_kmh > vehicle.max_speed_kmh:
+        raise UserError(
+            f"--speed-kmh: {speed_kmh:g} exceeds {vehicle.id}'s maximum "
+            f"{vehicle.max_speed_kmh:g} km/h"
+        )
+    return vehicle
+
+
+def _fixed_rail(args: argparse.Namespace) -> dict[str, Any]:
+    """The case fields --pattern and --mu-contaminated fix (the seed draws the rest)."""
+    out: dict[str, Any] = {}
+    if args.pattern is not None:
+        out["pattern"] = args.pattern
+    if args.mu_contaminated is not None:
+        out["mu_contaminated"] = args.mu_contaminated
+    return out
+
+
 def _positive(text: str) -> float:
     try:
         v = float(text)
@@ -116,22 +137,13 @@ def cmd_simulate(args: argparse.Namespace) -> dict[str, Any]:
     from wsp_env.runner import run_one, trace_metadata
     from wsp_env.trace_io import SensorModel, sample_run, write_trace
 
-    vehicle = load_vehicle(args.vehicle)
-    if args.speed_kmh > vehicle.max_speed_kmh:
-        raise UserError(
-            f"--speed-kmh: {args.speed_kmh:g} exceeds {vehicle.id}'s maximum "
-            f"{vehicle.max_speed_kmh:g} km/h"
-        )
+    vehicle = _vehicle_for_speed(args.vehicle, args.speed_kmh)
     rail = load_rail(args.rail, args.rails_config)  # a bad table or rail fails here, named
     try:
         policy = make_policy(args.policy, args.wsp_config)
     except FileNotFoundError as err:
         raise UserError(f"--policy: {err}") from None
-    case: dict[str, Any] = {"demand": args.demand}
-    if args.pattern is not None:
-        case["pattern"] = args.pattern
-    if args.mu_contaminated is not None:
-        case["mu_contaminated"] = args.mu_contaminated
+    case: dict[str, Any] = {"demand": args.demand, **_fixed_rail(args)}
     env_kwargs = {"substep_s": args.dt_s, "rails_config": args.rails_config}
     run, record = run_one(vehicle, args.rail, args.speed_kmh, policy, args.seed, case, env_kwargs)
     conditions = run["conditions"]
@@ -533,12 +545,7 @@ def cmd_rig(args: argparse.Namespace) -> dict[str, Any]:
     from wsp_env.policy import make_policy
     from wsp_env.rig import RigConfig, plot_rig, rig_test
 
-    vehicle = load_vehicle(args.vehicle)
-    if args.speed_kmh > vehicle.max_speed_kmh:
-        raise UserError(
-            f"--speed-kmh: {args.speed_kmh:g} exceeds {vehicle.id}'s maximum "
-            f"{vehicle.max_speed_kmh:g} km/h"
-        )
+    vehicle = _vehicle_for_speed(args.vehicle, args.speed_kmh)
     load_rail(args.rail, None)  # an unknown rail fails here, named
     rig_fields = (read_yaml(Path(args.rig_config)) or {}) if args.rig_config else {}
     if args.omega_noise_kmh is not None:
@@ -552,11 +559,7 @@ def cmd_rig(args: argparse.Namespace) -> dict[str, Any]:
         policy = make_policy(args.policy)
     except FileNotFoundError as err:
         raise UserError(f"--policy: {err}") from None
-    case: dict[str, Any] = {}
-    if args.pattern is not None:
-        case["pattern"] = args.pattern
-    if args.mu_contaminated is not None:
-        case["mu_contaminated"] = args.mu_contaminated
+    case = _fixed_rail(args)
     result = rig_test(vehicle, policy, args.rail, args.speed_kmh, args.seed, case, rig)
     if args.plot:
         plot_rig(result, args.plot)

@@ -18,6 +18,7 @@ one scale), then released for the reinforcement learning that follows.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -105,11 +106,12 @@ def pretrain(model: Any, env: Any, core: Any, cfg: PretrainConfig, gamma: float)
                 teacher.reset(np.flatnonzero(dones))
         size = min(filled, cap)
         before = _mae(policy, x_all[:size], y_all[:size], torch)
-        loss = _fit(policy, opt_actor, x_all[:size], y_all[:size], cfg, rng, torch)
+        actor_mean = partial(_actor_mean, policy)
+        loss = _regress(actor_mean, opt_actor, x_all[:size], y_all[:size], cfg, rng, torch)
         after = _mae(policy, x_all[:size], y_all[:size], torch)
         returns = _returns(r_rew, r_done, gamma).reshape(-1)
-        v_loss = _fit_value(policy, opt_critic, r_obs.reshape(-1, r_obs.shape[2]), returns,
-                            cfg, rng, torch)  # fmt: skip
+        v_loss = _regress(partial(_critic_value, policy), opt_critic,
+                          r_obs.reshape(-1, r_obs.shape[2]), returns, cfg, rng, torch)  # fmt: skip
         mae = float(np.mean(agree)) if agree else None
         history.append({"round": rnd, "samples": int(size), "actor_mse": loss,
                         "critic_mse": v_loss, "student_vs_teacher_mae": mae,
@@ -152,38 +154,28 @@ def _mae(policy: Any, x: np.ndarray, y: np.ndarray, torch: Any) -> float:
     total = 0.0
     with torch.no_grad():
         for i in range(0, len(x), 65536):
-            obs = torch.as_tensor(x[i : i + 65536])
-            features = policy.extract_features(obs, policy.pi_features_extractor)
-            mean = policy.action_net(policy.mlp_extractor.forward_actor(features))
+            mean = _actor_mean(policy, torch.as_tensor(x[i : i + 65536]))
             diff = torch.clamp(mean, -1.0, 1.0) - torch.as_tensor(y[i : i + 65536])
             total += float(torch.abs(diff).sum())
     return total / max(y.size, 1)
 
 
-def _fit(policy: Any, opt: Any, x: np.ndarray, y: np.ndarray, cfg: PretrainConfig,
-         rng: np.random.Generator, torch: Any) -> float:  # fmt: skip
-    total, count = 0.0, 0
-    for idx in _batches(len(x), cfg, rng):
-        obs = torch.as_tensor(x[idx])
-        features = policy.extract_features(obs, policy.pi_features_extractor)
-        mean = policy.action_net(policy.mlp_extractor.forward_actor(features))
-        loss = torch.mean((mean - torch.as_tensor(y[idx])) ** 2)
-        opt.zero_grad()
-        loss.backward()
-        opt.step()
-        total += float(loss.detach()) * len(idx)
-        count += len(idx)
-    return total / max(count, 1)
+def _actor_mean(policy: Any, obs: Any) -> Any:
+    features = policy.extract_features(obs, policy.pi_features_extractor)
+    return policy.action_net(policy.mlp_extractor.forward_actor(features))
 
 
-def _fit_value(policy: Any, opt: Any, x: np.ndarray, returns: np.ndarray, cfg: PretrainConfig,
-               rng: np.random.Generator, torch: Any) -> float:  # fmt: skip
+def _critic_value(policy: Any, obs: Any) -> Any:
+    features = policy.extract_features(obs, policy.vf_features_extractor)
+    return policy.value_net(policy.mlp_extractor.forward_critic(features)).squeeze(-1)
+
+
+def _regress(predict: Any, opt: Any, x: np.ndarray, y: np.ndarray, cfg: PretrainConfig,
+             rng: np.random.Generator, torch: Any) -> float:  # fmt: skip
+    """Minibatch least squares of ``predict(obs)`` on ``y``; returns the mean squared error."""
     total, count = 0.0, 0
     for idx in _batches(len(x), cfg, rng):
-        obs = torch.as_tensor(x[idx])
-        features = policy.extract_features(obs, policy.vf_features_extractor)
-        value = policy.value_net(policy.mlp_extractor.forward_critic(features)).squeeze(-1)
-        loss = torch.mean((value - torch.as_tensor(returns[idx])) ** 2)
+        loss = torch.mean((predict(torch.as_tensor(x[idx])) - torch.as_tensor(y[idx])) ** 2)
         opt.zero_grad()
         loss.backward()
         opt.step()
