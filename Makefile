@@ -20,8 +20,8 @@ demo: $(STAMP)
 		--plot runs/demo/simulate_classical.png --trace runs/demo/trace_classical
 	$(BIN)/wsp-env calibrate runs/demo/trace_classical.csv --json runs/demo/calibrate.json \
 		--report runs/demo/calibration --export runs/demo/calibrated.yaml
-	$(BIN)/wsp-env evaluate --policy classical --policy none --policy oracle --suite quick \
-		--json runs/demo/evaluate.json --report runs/demo/report
+	$(BIN)/wsp-env evaluate --policy classical --policy ppo_bc_uic_z1 --policy none --policy oracle \
+		--suite quick --json runs/demo/evaluate.json --report runs/demo/report
 	$(BIN)/wsp-env rig --policy classical --rail soap --mu-contaminated 0.08 --pattern uniform \
 		--speed-kmh 120 --json runs/demo/rig.json --plot runs/demo/rig.png
 	$(BIN)/wsp-env traction --json runs/demo/traction.json --plot runs/demo/traction.png

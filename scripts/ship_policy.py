@@ -37,7 +37,19 @@ def learning_curve(run: Path, out_png: Path, title: str) -> None:
 
     rows = list(csv.DictReader((run / "progress.csv").open()))
     validation = json.loads((run / "validation.json").read_text())
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4))
+    pre_path = run / "pretrain.json"
+    if pre_path.exists():  # the imitation warm start: its rounds first
+        fig, (ax0, ax1, ax2) = plt.subplots(1, 3, figsize=(16, 4))
+        rounds = json.loads(pre_path.read_text())["rounds"]
+        ax0.plot([r["round"] for r in rounds], [r["actor_mse"] for r in rounds], "o-", ms=3,
+                 label="actor MSE on the data set")  # fmt: skip
+        drove = [(r["round"], r["student_vs_teacher_mae"]) for r in rounds
+                 if r["student_vs_teacher_mae"] is not None]  # fmt: skip
+        ax0.plot(*zip(*drove, strict=True), "s-", ms=3, label="|student - teacher|, student drives")
+        ax0.set(xlabel="DAgger round", ylabel="action error", title="imitation warm start")
+        ax0.legend(fontsize=8)
+    else:
+        fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4))
     steps = [float(r["time/total_timesteps"]) / 1e6 for r in rows]
     for key in sorted(k for k in rows[0] if k.startswith("episode_by_rail/")):
         pts = [(s, float(r[key])) for s, r in zip(steps, rows, strict=True) if r.get(key)]
@@ -83,6 +95,10 @@ def main() -> None:
     ap.add_argument("run", help="a run folder of `wsp-env train`")
     ap.add_argument("--name", required=True, help="the shipped policy's name")
     ap.add_argument("--model", default="best_model", help="model stem in the run (best_model)")
+    ap.add_argument(
+        "--trained-by", action="append", default=None,
+        help="the commands that trained the run, as run (default: the plain one)",
+    )  # fmt: skip
     args = ap.parse_args()
     run = Path(args.run)
     out = pretrained_dir()
@@ -98,27 +114,54 @@ def main() -> None:
     train = json.loads((run / "train.json").read_text())
     validation = json.loads((run / "validation.json").read_text())
     rel = os.path.relpath(run, ROOT)
+    trained_by = args.trained_by or [
+        f".venv/bin/wsp-env train --config configs/train/{name}.yaml --out {rel}"
+    ]
     header = (
         f"# The exact config of the shipped policy {name} (copied from {rel}/config.yaml).\n"
-        f"# Trained by:\n#   .venv/bin/wsp-env train --config configs/train/{name}.yaml "
-        f"--out {rel}\n# shipped by:\n#   .venv/bin/python scripts/ship_policy.py {rel} "
-        f"--name {name} --model {args.model}\n"
+        "# Trained by:\n"
+        + "".join(f"#   {c}\n" for c in trained_by)
+        + f"# shipped by:\n#   .venv/bin/python scripts/ship_policy.py {rel} --name {name} "
+        f"--model {args.model}\n"
     )
+    info_trained_by = trained_by
     (out / f"{name}.yaml").write_text(header + yaml.safe_dump(config, sort_keys=False))
+    rows = list(csv.DictReader((run / "progress.csv").open()))
     info = {
         "name": name,
         "model": f"{rel}/{args.model}.zip",
         "algo": train["algo"],
+        "trained_by": info_trained_by,
         "timesteps_trained": train["total_timesteps"],
         "shipped_at_timesteps": validation["best"]["timesteps"],
-        "wall_time_s": train["wall_time_s"],
-        "wall_time_note": "of the last `wsp-env train` call (the whole run when not resumed)",
+        "wall_time_s": None,  # below: warm start + every call's reinforcement learning
         "resumed_from": train.get("resumed_from"),
-        "env_steps_per_s": train["env_steps_per_s"],
+        # SB3's own figure over the reinforcement-learning part (the updates included)
+        "env_steps_per_s": float(rows[-1]["time/fps"]) if rows else train["env_steps_per_s"],
         "machine": f"{platform.machine()}, {os.cpu_count()} cores, {platform.system()}, no GPU",
         "best_validation": validation["best"],
         "classical_validation": validation["classical"],
     }
+    calls = sorted((run / "logs").glob("from_step_*/progress.csv"))
+    rl_wall = 0.0
+    for f in calls:
+        last = list(csv.DictReader(f.open()))
+        rl_wall += float(last[-1]["time/time_elapsed"]) if last else 0.0
+    info["wall_time_s"] = rl_wall
+    info["wall_time_note"] = (
+        "reinforcement learning: SB3's time_elapsed summed over the run's calls (validations "
+        "included); plus the imitation warm start where there is one"
+    )
+    if (run / "pretrain.json").exists():
+        pre = json.loads((run / "pretrain.json").read_text())
+        # older runs did not time the warm start: the files' times bound it
+        wall = pre.get("wall_time_s") or (
+            (run / "pretrain.json").stat().st_mtime - (run / "config.yaml").stat().st_mtime
+        )
+        info["pretrain"] = {"teacher": pre["teacher"], "env_steps": pre["env_steps"],
+                            "rounds": len(pre["rounds"]), "wall_time_s": wall,
+                            "validation": pre["validation"]}  # fmt: skip
+        info["wall_time_s"] += wall
     (out / f"{name}.json").write_text(json.dumps(info, indent=1) + "\n")
     learning_curve(run, out / f"{name}_learning_curve.png", f"{name} ({train['algo']})")
     for p in sorted(out.glob(f"{name}*")):

@@ -650,7 +650,8 @@ def _add_export(sub: argparse._SubParsersAction) -> None:
         "in) as ONNX for an embedded WSP, and measure ONNX Runtime's per-decision latency. "
         "Model files are pickles: load only files you trust. See wsp_env/export.py.",
     )
-    p.add_argument("model", help="a model file written by `wsp-env train` (.zip)")
+    p.add_argument("model", help="a model file written by `wsp-env train` (.zip), or a shipped "
+                   "policy's name")  # fmt: skip
     p.add_argument("--onnx", required=True, help="output path (.onnx)")
     p.add_argument("--json", dest="json_path", default=None, help="write the result here")
     p.set_defaults(func=cmd_export)

@@ -73,7 +73,13 @@ def export_onnx(model_path: str | Path, out_path: str | Path) -> dict[str, Any]:
     latency of ONNX Runtime on this machine (one observation, median of 2,000 calls)."""
     import torch
 
-    policy = SB3Policy(model_path)
+    from wsp_env.policy import make_policy
+
+    policy = make_policy(str(model_path))  # a model file or a shipped policy's name
+    if not isinstance(policy, SB3Policy):
+        raise ValueError(
+            f"{model_path}: not a trained model (classical, none and oracle are rules)"
+        )
     actor, dim, frame_fill = _actor_module(policy)
     out = Path(out_path)
     if out.suffix != ".onnx":

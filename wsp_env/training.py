@@ -704,7 +704,9 @@ def train(
             from wsp_env.imitation import pretrain
 
             gamma = float(cfg.hyperparams.get("gamma", 0.99))
+            t0 = time.perf_counter()
             pretrained = pretrain(model, env, _braking_core(venv), cfg.pretrain, gamma)
+            pretrained["wall_time_s"] = time.perf_counter() - t0
             pretrained["validation"] = validator.evaluate(model)  # the warm start, at step 0
             write_json(out / "pretrain.json", pretrained)
         formats = ["csv"] + (["tensorboard"] if _have_tensorboard() else [])
@@ -717,6 +719,7 @@ def train(
             model.learn(remaining, callback=callbacks, reset_num_timesteps=False,
                         log_interval=10 if cfg.algo in OFF_POLICY else 1)  # fmt: skip
         wall = time.perf_counter() - started
+        learn_wall = wall - (pretrained["wall_time_s"] if pretrained is not None else 0.0)
         steps = int(model.num_timesteps) - start
         final = validator.evaluate(model)
         save_policy_files(model, out / "model", cfg)
@@ -731,7 +734,7 @@ def train(
             "finished": int(model.num_timesteps) >= total,
             "timesteps_this_call": steps,
             "wall_time_s": wall,
-            "env_steps_per_s": steps / wall if wall > 0 else 0.0,
+            "env_steps_per_s": steps / learn_wall if learn_wall > 0 else 0.0,
             "seed": cfg.seed,
             "resumed_from": start if resume is not None else None,
             "best_validation": validator.best,
@@ -741,6 +744,7 @@ def train(
         }
         if pretrained is not None:
             result["pretrain_env_steps"] = pretrained["env_steps"]
+            result["pretrain_wall_time_s"] = pretrained["wall_time_s"]
         from wsp_env.cli import write_json
 
         write_json(out / "train.json", result)
