@@ -79,6 +79,7 @@ def test_pretraining_moves_the_student_toward_the_teacher(tmp_path):
         ({"algo": "sac", "pretrain": PRETRAIN}, "pretrain"),
         ({"pretrain": {**PRETRAIN, "teacher": "nobody"}}, "pretrain.teacher"),
         ({"pretrain": {**PRETRAIN, "rounds": 0}}, "pretrain.rounds"),
+        ({"pretrain": {**PRETRAIN, "steps_per_round": 4}}, "pretrain.steps_per_round"),
         ({"pretrain": PRETRAIN, "env_kwargs": {"action_mode": "residual"}}, "pretrain"),
     ],
 )

@@ -259,6 +259,9 @@ def parse_train_config(data: Any, source: str = "") -> TrainConfig:
         from wsp_env.imitation import PretrainConfig
 
         pretrain_cfg = from_dict(PretrainConfig, data.pop("pretrain"), "pretrain")
+        if pretrain_cfg.steps_per_round < n_envs:
+            raise ConfigError(f"pretrain.steps_per_round: {pretrain_cfg.steps_per_round} is "
+                              f"fewer than one step of the {n_envs} environments")  # fmt: skip
         if algo not in ("ppo", "a2c"):
             raise ConfigError(
                 f"pretrain: a warm start of the actor-critic of ppo or a2c, not {algo}"
