@@ -188,8 +188,15 @@ def _algo_classes() -> dict[str, type]:
 
 def policy_metadata(config: dict[str, Any], name: str) -> dict[str, Any]:
     """What a model file must say about itself to be evaluated (``write_model_metadata``)."""
+    from wsp_env.config import ConfigError, load_vehicle
+
     env_kwargs = config.get("env_kwargs") or {}
     vehicle = env_kwargs.get("vehicle", "uic_z1")
+    if isinstance(vehicle, str):  # an id or a YAML path: the id is what evaluation compares
+        try:
+            vehicle = load_vehicle(vehicle).id
+        except (ConfigError, OSError):
+            pass
     return {
         "format": "wsp-env-policy/1",
         "name": name,
