@@ -63,7 +63,14 @@ from wsp_env import env_kernel as K
 from wsp_env.config import ConfigError, VehicleConfig, from_dict, load_vehicle
 from wsp_env.evaluation import CaseConfig, SuiteConfig, expand
 from wsp_env.physics import layout as L
-from wsp_env.physics.brake import brake_torque, decay_factor, demand_bar, pad_factor
+from wsp_env.physics.brake import (
+    brake_torque,
+    cylinder_step,
+    decay_factor,
+    demand_bar,
+    pad_factor,
+    valve_target,
+)
 from wsp_env.physics.contact import kalker_longitudinal_stiffness_N
 from wsp_env.physics.integrator import INV_P_ATM, _step_env
 from wsp_env.runner import NOMINAL_SCENARIO
@@ -157,12 +164,8 @@ def rig_advance(
         for k in range(n_axles):
             r = axle_par[0, k, L.AP_RADIUS]
             p = pressure[k]
-            target = p if cmd[k] < 0.0 else min(cmd[k], 1.0) * p_demand
-            target = min(target, p_demand)
-            if target > p:
-                p_new = min(target + (p - target) * fill_decay, p + fill_step)
-            else:
-                p_new = max(target + (p - target) * vent_decay, p - vent_step)
+            target = valve_target(cmd[k], p, p_demand)
+            p_new = cylinder_step(p, target, fill_decay, fill_step, vent_decay, vent_step)
             if p_new < p:  # vented air, as the track's pneumatics count it
                 air[k] += axle_par[0, k, L.AP_CYL_VOLUME_L] * (p - p_new) * INV_P_ATM
             pressure[k] = p_new
@@ -227,7 +230,8 @@ def hil_period(
     vehicle over one substep of ``ctrl``. Returns the number of periods run (fewer when the
     virtual train stops or falls below ``handover_v``) and the record rows written."""
     na = omega.shape[0]
-    dummy_cmd = np.ones((1, na))
+    dummy_cmd = np.ones((1, na))  # the virtual vehicle's valves are unused (external torques)
+    u = np.empty(na)  # the drive torques of the period, reused
     for i in range(n_ctrl):
         step = step0 + i
         if env_state[0, L.ES_STOPPED] > 0.0 or env_state[0, L.ES_V] < handover_v:
@@ -298,7 +302,8 @@ def hil_period(
             record[n_rec, 2] = env_state[0, L.ES_X]
             record[n_rec, 3] = p_demand
             n_rec += 1
-        u = est[:, E_U].copy()
+        for k in range(na):
+            u[k] = est[k, E_U]
         rig_advance(n_rig, h, u, active, p_demand, env_par, axle_par, fill_decay, vent_decay,
                     mu_kin, stiffness, env_par[0, L.EP_MASS], link_k, link_c, roller_r,
                     roller_j, env_par[0, L.EP_V_EPS], omega, roller, pressure, body, air,

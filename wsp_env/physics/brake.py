@@ -139,6 +139,24 @@ def demand_bars(env_par, times, out):
 
 
 @njit(**INLINE)
+def valve_target(cmd, p, p_demand):
+    """The pressure a valve command drives the cylinder toward: a fraction of the demand, or
+    (``cmd < 0``, ``layout.CMD_HOLD``) the pressure it holds, never above the demand."""
+    if cmd < 0.0:
+        return min(p, p_demand)
+    return min(cmd, 1.0) * p_demand
+
+
+@njit(**INLINE)
+def cylinder_step(p, target, fill_decay, fill_step, vent_decay, vent_step):
+    """Cylinder pressure after one substep toward ``target``: a first-order lag (``*_decay`` =
+    ``exp(-dt / tau)``) capped at the valve's rate (``*_step`` = rate dt), fill or vent."""
+    if target > p:
+        return min(target + (p - target) * fill_decay, p + fill_step)
+    return max(target + (p - target) * vent_decay, p - vent_step)
+
+
+@njit(**INLINE)
 def pad_factor(env_par, e, v):
     """Pad friction relative to nominal at train speed ``v`` m/s: the run's scale times a linear
     speed dependence about ``EP_PAD_VREF``, never below ``PAD_FACTOR_MIN``."""

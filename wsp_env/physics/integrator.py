@@ -40,7 +40,13 @@ from wsp_env.physics.adhesion import (
     REC_BASIS_WHEEL_METRE,
     adhesion,
 )
-from wsp_env.physics.brake import brake_torque, demand_fraction, pad_factor
+from wsp_env.physics.brake import (
+    brake_torque,
+    cylinder_step,
+    demand_fraction,
+    pad_factor,
+    valve_target,
+)
 from wsp_env.physics.layout import (
     AA_ADH_INT,
     AA_AIR_L,
@@ -254,15 +260,9 @@ def _step_env(
                 # --- pneumatics: valve command -> cylinder pressure --------------------------
                 u = axle_state[e, k, AS_CMD] if use_prev else cmd[e, k]
                 p = axle_state[e, k, AS_P]
-                if u < 0.0:
-                    target = min(p, p_d)
-                else:
-                    target = min(u, 1.0) * p_d
+                target = valve_target(u, p, p_d)
                 axle_state[e, k, AS_VENTING] = 1.0 if target < p - VENT_MARGIN_BAR else 0.0
-                if target > p:
-                    p_new = min(target + (p - target) * fill_decay, p + fill_step)
-                else:
-                    p_new = max(target + (p - target) * vent_decay, p - vent_step)
+                p_new = cylinder_step(p, target, fill_decay, fill_step, vent_decay, vent_step)
                 if p_new < p:
                     axle_acc[e, k, AA_AIR_L] += (
                         axle_par[e, k, AP_CYL_VOLUME_L] * (p - p_new) * INV_P_ATM
