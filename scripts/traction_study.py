@@ -1,4 +1,4 @@
-"""Why the traction test's axles 2-3 slide less than seed 002 Table 9 (README "Traction").
+"""The traction test's soap curve and sliding under variants of the rail (README "Traction").
 
     .venv/bin/python scripts/traction_study.py      # a few seconds
 

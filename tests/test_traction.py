@@ -44,20 +44,46 @@ def test_antiskid_stops_the_spin_and_gains_distance():
     guarded = run_traction().summary
     # without the device the unloaded leading axles spin away (tens of km/h)
     assert min(free["mean_sliding_kmh"]) < -20.0
-    # with it every axle creeps or slips a little, never spins, and the start is longer
+    # with it every axle creeps or slips a few km/h, never spins, and the start is longer
     slide = np.array(guarded["mean_sliding_kmh"])
-    assert np.all(slide < 0.0) and np.all(slide > -1.5)
+    assert np.all(slide < 0.0) and np.all(slide > -4.0)
     assert guarded["distance_m"] > free["distance_m"]
 
 
-def test_seed002_traction_distance_and_the_trailing_axle():
-    """Table 10's span at the documented 20 s, and axle 4 the least sliding (load transfer and
-    the rail the leading axles cleaned). Table 9's magnitudes for axles 2-3 are an open finding
-    (README): the check reports them, this test does not assert them."""
+def test_seed002_traction_tables_9_and_10():
+    """Table 10's span at the documented 20 s; Table 9: every axle's mean sliding inside the
+    T1-T2 envelope widened by 0.5 km/h, axle 4 the least sliding (load transfer and the rail
+    the leading axles cleaned) and axle 1 the most."""
     check = seed002_traction_check()
     assert TABLE10_M[0] <= check["distance_m"] <= TABLE10_M[1]
-    assert check["axle4_least_sliding"]
-    assert check["mean_sliding_kmh"][0] == min(check["mean_sliding_kmh"])  # the leading axle
+    lo, hi = (np.array(x) for x in check["table9_envelope_kmh"])
+    slide = np.array(check["mean_sliding_kmh"])
+    assert np.all((lo <= slide) & (slide <= hi)), (slide, lo, hi)
+    assert check["axle4_least_sliding"] and check["passed"]
+    assert slide[0] == slide.min()  # the leading axle
+
+
+def test_traction_recovery_is_seldom_reached_as_seed002_says():
+    """Seed 002 §5.3.2: in the traction test the recovery is not reached (low sliding energy).
+    Eq. 10 as written (specific sliding against the wheel's speed, J/m) puts W_lim at ~8 % of
+    slip: the axles pass it only in the slips at low speed (measured 21 / 5 / 9 / 3 % of the
+    test on axles 1-4); the sliding-power reading (W) would pass it 47 / 24 / 32 / 3 %."""
+    from wsp_env.traction import seed002_rail
+
+    rail = seed002_rail()
+    sim = TrainSim(load_vehicle("e402b"), n_envs=1)
+    sim.configure(0, RunSetup(speed_kmh=5.0, rail=rail))
+    n_static = sim.axle_par[0, :, L.AP_N_STATIC]
+    assert np.all(n_static > 150e3)  # ~218 kN: 89 t on four axles
+    rec = run_traction().record
+    v = rec["v_train_kmh"][:, None] / 3.6
+    wheel = rec["v_axle_kmh"] / 3.6
+    mu = np.abs(rec["mu"])
+    specific = mu * n_static * np.abs(wheel - v) / np.maximum(wheel, 0.1)  # Eq. 10, J/m
+    above = (specific > rail.recovery.w_lim).mean(axis=0)
+    assert np.all(above < 0.25) and np.all(above[1:] < 0.1), above
+    power = mu * n_static * np.abs(wheel - v)  # W: the braking tables' reading
+    assert np.all((power > rail.recovery.w_lim).mean(axis=0)[:3] > 2.0 * above[:3])
 
 
 def test_traction_cli(tmp_path, capsys):

@@ -599,8 +599,14 @@ def _add_traction(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--speed-kmh", type=_positive, default=5.0, help="initial speed (5)")
     p.add_argument("--torque-nm", type=_positive, default=12300.0, help="per axle (12300)")
     p.add_argument("--duration-s", type=_positive, default=20.0, help="test duration (20)")
-    p.add_argument("--mu-contaminated", type=_positive, default=0.09, help="level (0.09)")
-    p.add_argument("--antiskid-config", default=None, help="anti-skid thresholds (YAML)")
+    p.add_argument(
+        "--mu-contaminated", type=_positive, default=None,
+        help="soap level under axle 1 (default 0.0846: Table 8's 0.09 x R_1, traction.py)",
+    )  # fmt: skip
+    p.add_argument(
+        "--antiskid-config", default=None,
+        help="anti-skid thresholds (YAML; default configs/antiskid/e402b_seed002.yaml)",
+    )  # fmt: skip
     p.add_argument("--no-antiskid", action="store_true", help="the full torque throughout")
     p.add_argument("--json", dest="json_path", default=None, help="write the result here")
     p.add_argument("--plot", default=None, help="write a PNG of speeds, torques, adhesion")
@@ -610,7 +616,7 @@ def _add_traction(sub: argparse._SubParsersAction) -> None:
 def cmd_traction(args: argparse.Namespace) -> dict[str, Any]:
     from wsp_env.baselines.antiskid import AntiSkid, AntiSkidConfig
     from wsp_env.config import read_yaml
-    from wsp_env.traction import plot_traction, run_traction
+    from wsp_env.traction import MU_HEAD, plot_traction, run_traction
 
     vehicle = load_vehicle(args.vehicle)
     antiskid = None
@@ -622,7 +628,8 @@ def cmd_traction(args: argparse.Namespace) -> dict[str, Any]:
         antiskid = AntiSkid(cfg)
     run = run_traction(
         vehicle, args.torque_nm, args.speed_kmh, args.duration_s,
-        mu_contaminated=args.mu_contaminated, antiskid=antiskid, no_antiskid=args.no_antiskid,
+        mu_contaminated=args.mu_contaminated or MU_HEAD, antiskid=antiskid,
+        no_antiskid=args.no_antiskid,
     )  # fmt: skip
     if args.plot:
         plot_traction(run, args.plot)

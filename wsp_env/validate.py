@@ -30,12 +30,10 @@ The adhesion model must hold these together (DESIGN §3); each has a pass flag:
   has an RMS below ``RIG_E_OMEGA_RMS_KMH`` on every axle (0.5 km/h: under 4 % of the test's
   13 km/h mean sliding, Table 6). The torque estimation error is reported.
 * ``seed002_traction`` — seed 002's traction test (E402B from 5 km/h, 12,300 N m per axle,
-  Table 8's soap, the default anti-skid device, 20 s: ``traction.py``): each axle's mean sliding
-  inside Table 9's T1-T2 envelope widened by 0.5 km/h, axle 4 the least sliding, and the
-  distance inside Table 10's T2-T1 span. Reported with its pass flag but **not yet part of the
-  overall verdict** (``OPEN_CHECKS``): axles 2 and 3 slide 0.2-0.3 km/h against Table 9's
-  1.0-1.5 — they run just below the soap curve's peak (~1 % creep) and the anti-skid never acts
-  (README "Traction"), an open finding of issue 12.
+  Table 8's soap with axle 1 at ``R_1 mu_c``, the recovery by Eqs. 9-10 as written, the E402B
+  device of ``configs/antiskid/e402b_seed002.yaml``, 20 s: ``traction.py``): each axle's mean
+  sliding inside Table 9's T1-T2 envelope widened by 0.5 km/h, axle 4 the least sliding, and
+  the distance inside Table 10's T2-T1 span.
 """
 
 from __future__ import annotations
@@ -69,7 +67,7 @@ SEED000_SPEED_KMH = 150.0
 SEED000_SAMPLE_S = 0.1
 SEED000_SPEED_NOISE_KMH = 0.05
 DRY_QUIET_TOL = 0.01
-OPEN_CHECKS = ("seed002_traction",)  # reported, not yet in the overall verdict (docstring)
+OPEN_CHECKS: tuple[str, ...] = ()  # checks reported but kept out of the overall verdict
 RIG_STOP_TOL = 0.01
 RIG_E_OMEGA_RMS_KMH = 0.5
 
