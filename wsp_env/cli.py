@@ -314,6 +314,8 @@ def cmd_calibrate(args: argparse.Namespace) -> dict[str, Any]:
         "errors_after": result.errors_after,
         "added_effects": [s.as_dict() for s in result.added],
         "unexplained": result.unexplained,
+        "dropped_effects": result.dropped,
+        "channels": result.channel_health,
         "adhesion_law": result.adhesion_law,
         "candidates": result.considered,
         "notes": trace.notes,
@@ -338,6 +340,11 @@ def _print_calibrate(result: dict[str, Any]) -> None:
         params = ", ".join(f"{k} {v:.4g}" for k, v in e["parameters"].items())
         change = f"{e['before']:.3f} -> {e['after']:.3f}"
         print(f"  added {e['category']} on {e['channel']}: {change} ({params})")
+    for d in result.get("dropped_effects", []):
+        print(f"  dropped {d['category']}: {d['reason']}")
+    for name, h in result.get("channels", {}).items():
+        if not h["usable"]:
+            print(f"  channel {name} not used: {h['reason']}")
     for u in result["unexplained"]:
         print(
             f"  unexplained: {u['channel']} still {u['rmse']:.3f} "

@@ -56,6 +56,7 @@ from wsp_env.calibration.adhesion_estimate import (
     pooled_points,
     removed_fraction,
 )
+from wsp_env.calibration.plausibility import channel_health, implausible
 from wsp_env.calibration.residuals import (
     MIN_SPEED_KMH,
     anchored,
@@ -100,6 +101,9 @@ class Step:
     before: float
     after: float
     delta_bic: float
+    # how sure: the BIC gain when added, the cut against the channel's noise floor, and the BIC
+    # gain of keeping it once every other effect is in (the re-test, ``retest``)
+    confidence: dict[str, float] = field(default_factory=dict)
 
     def as_dict(self) -> dict[str, Any]:
         return {
@@ -110,6 +114,7 @@ class Step:
             "before": self.before,
             "after": self.after,
             "delta_bic": self.delta_bic,
+            "confidence": self.confidence,
         }
 
 
@@ -124,6 +129,10 @@ class Result:
     unexplained: list[dict[str, float | str]] = field(default_factory=list)
     # the adhesion law in the end: mu0, K, K_rozv, recovery (W_lim / W_max in kW, gain) if any
     adhesion_law: dict[str, float] = field(default_factory=dict)
+    # per channel: rmse, samples, usable, reason (``plausibility.channel_health``)
+    channel_health: dict[str, dict[str, Any]] = field(default_factory=dict)
+    # effects added and then dropped by the re-test, with the reason
+    dropped: list[dict[str, Any]] = field(default_factory=list)
 
 
 # ---- linear fits on the balance channel ------------------------------------------------------
@@ -437,6 +446,114 @@ CANDIDATES_COASTING = [
 ]
 
 
+# ---- re-test: every balance effect must still earn its place once all are in ---------------
+
+
+def _step_columns(trace: Trace, step: Step) -> list[np.ndarray] | None:
+    """The balance regressors of an added effect (``None``: chosen on another channel)."""
+    if step.channel != "train_speed_balance_kmh":
+        return None
+    mass = float(trace.vehicle["mass_kg"])
+    brake = brake_force_N(trace).sum(axis=1)
+    v = trace.v_train_kmh / 3.6
+    drop = -masked_cumdiff(trace.v_train_kmh, balance_intervals(trace))
+    if step.category == "gradient":
+        return [_balance_regressor(trace, np.full(len(v), mass * G))]
+    if step.category == "running_resistance":
+        return [_balance_regressor(trace, np.ones_like(v)), _balance_regressor(trace, v * v)]
+    if step.category == "pad_friction":
+        cols = [_balance_regressor(trace, brake)]
+        if "slope_per_mps" in step.parameters:
+            cols.append(_balance_regressor(trace, brake * (v - 100.0 / 3.6)))
+        return cols
+    if step.category == "unmeasured_brake_force":
+        return [_balance_regressor(trace, _demand_fraction(trace))]
+    if step.category == "pressure_lag":
+        tau = step.parameters["lag_s"]
+        lagged = np.interp(trace.time_s - tau, trace.time_s, brake, left=0.0)
+        # the lag's signature (its coefficient is -1 when the lag is all there is)
+        return [_balance_regressor(trace, lagged) - _balance_regressor(trace, brake)]
+    if "speed_scale_error" in step.parameters:
+        return [drop]
+    if "speed_lag_s" in step.parameters:
+        return [np.gradient(drop, trace.time_s)]
+    return None
+
+
+def _params_from(step: Step, coef: np.ndarray) -> dict[str, float]:
+    """An effect's parameters from its columns' joint least-squares coefficients."""
+    c = [float(x) for x in coef]
+    cat, p = step.category, step.parameters
+    if cat == "gradient":
+        return {"gradient_permille": -1000.0 * c[0]}
+    if cat == "running_resistance":
+        return {"delta_a_N": -c[0], "delta_c_N_per_mps2": -c[1]}
+    if cat == "pad_friction":
+        out = {"scale": 1.0 - c[0]}
+        if "slope_per_mps" in p:
+            out["slope_per_mps"] = -c[1]
+        return out
+    if cat == "unmeasured_brake_force":
+        return {"force_at_full_demand_N": -c[0]}
+    if "speed_scale_error" in p:
+        return {"speed_scale_error": -c[0]}
+    if "speed_lag_s" in p:
+        return {"speed_lag_s": c[0]}
+    return dict(p)  # the pressure lag keeps its grid value
+
+
+def _retest_balance(
+    trace: Trace, result: Result, residual0: np.ndarray, mask: np.ndarray
+) -> np.ndarray:
+    """Refit every balance effect jointly on the nominal residual; drop, one at a time, the
+    weakest that no longer earns its place with all the others in (BIC gain above
+    ``MIN_DELTA_BIC`` and ``MIN_REDUCTION / 2`` of the channel's RMSE): an effect added early
+    that a later one explains better, or one that only compensated for another. Kept effects
+    get their joint parameters and the re-test's BIC gain in ``confidence``; returns the final
+    residual."""
+    fixed = residual0.copy()
+    for st in result.added:  # a scale error chosen on the coasting channel acts here as found
+        if st.channel == "coasting_creep_pct" and "speed_scale_error" in st.parameters:
+            drop = -masked_cumdiff(trace.v_train_kmh, balance_intervals(trace))
+            fixed = fixed + st.parameters["speed_scale_error"] * anchored(drop, trace.time_s, mask)
+    n = int(mask.sum())
+    while True:
+        steps = [st for st in result.added if _step_columns(trace, st) is not None]
+        if not steps:
+            return fixed
+        cols = [_step_columns(trace, st) or [] for st in steps]
+        k_all = sum(len(c) for c in cols)
+        coef, res_full = _linear(trace, fixed, mask, [x for c in cols for x in c])
+        rss_full = float(np.sum(res_full[mask] ** 2))
+        worst: tuple[float, int] | None = None
+        for j, st in enumerate(steps):
+            others = [x for i, c in enumerate(cols) if i != j for x in c]
+            res_wo = _linear(trace, fixed, mask, others)[1] if others else fixed
+            rss_wo = float(np.sum(res_wo[mask] ** 2))
+            dbic = _bic(rss_full, n, k_all) - _bic(rss_wo, n, k_all - len(cols[j]))
+            cut = 1.0 - math.sqrt(rss_full / max(rss_wo, 1e-300))
+            st.confidence["retest_delta_bic"] = dbic
+            st.confidence["retest_cut_pct"] = 100.0 * cut
+            if dbic > -MIN_DELTA_BIC or cut < 0.5 * MIN_REDUCTION:
+                if worst is None or dbic > worst[0]:
+                    worst = (dbic, j)
+        if worst is None:
+            start = 0
+            for st, c in zip(steps, cols, strict=True):
+                st.parameters = _params_from(st, coef[start : start + len(c)])
+                start += len(c)
+            return res_full
+        gone = steps[worst[1]]
+        result.added.remove(gone)
+        result.dropped.append(
+            {**gone.as_dict(), "reason": (
+                f"re-test: with the other effects in, it gains BIC {-worst[0]:.1f} and cuts "
+                f"{gone.confidence['retest_cut_pct']:.1f} % (needs {MIN_DELTA_BIC:g} and "
+                f"{50 * MIN_REDUCTION:g} %)"
+            )}
+        )  # fmt: skip
+
+
 def _channel_of(cand: Any) -> str:
     if isinstance(cand, tuple):
         return "train_speed_balance_kmh"
@@ -454,6 +571,8 @@ def discover(trace: Trace) -> Result:
     chans = channels(trace)
     before = {k: c.rmse for k, c in chans.items()}
     result = Result(errors_before=before, errors_after=dict(before))
+    health = channel_health(trace, chans)
+    result.channel_health = health
     sampling = chans["train_speed_balance_kmh"].detail.get("sampling_rmse", 0.0)
     speed_noise = noise_std(trace.v_train_kmh)
     floors = {
@@ -492,7 +611,7 @@ def discover(trace: Trace) -> Result:
                 ch = cand.channel
                 res, mask = residual[ch], masks[ch]
                 n = int(mask.sum())
-                if n < 10:
+                if n < 10 or not health[ch]["usable"]:
                     continue
                 rss0 = float(np.sum(res[mask] ** 2))
                 rmse0 = math.sqrt(rss0 / n)
@@ -509,13 +628,18 @@ def discover(trace: Trace) -> Result:
                 row = {"name": cand.name, "category": cand.category, "channel": ch,
                        "before": rmse0, "after": rmse1, "delta_bic": dbic}  # fmt: skip
                 result.considered.append(row)
+                reason = implausible(cand.category, params, trace)
+                if reason:
+                    row["rejected"] = reason
+                    continue
                 gain = 1 - rmse1 / rmse0
                 if dbic < -MIN_DELTA_BIC and gain >= MIN_REDUCTION:
                     qualified.append((gain, cand, params, new, rmse0, rmse1, dbic, k))
         ch = "train_speed_balance_kmh"
         res, mask = residual[ch], masks[ch]
         n = int(mask.sum())
-        if n >= 10 and not any(c + ch in used for c in PAIR_NAMES):
+        pair_ok = health[ch]["usable"] and not any(c + ch in used for c in PAIR_NAMES)
+        if n >= 10 and pair_ok:
             rss0 = float(np.sum(res[mask] ** 2))
             rmse0 = math.sqrt(rss0 / n)
             if rmse0 >= NOISE_FACTOR * floors[ch]:
@@ -536,8 +660,14 @@ def discover(trace: Trace) -> Result:
                         row = {"name": f"{a} + {b}", "category": f"{a}+{b}", "channel": ch,
                                "before": rmse0, "after": rmse1, "delta_bic": dbic}  # fmt: skip
                         result.considered.append(row)
+                        params = (terms[a][1](coef[0]), terms[b][1](coef[1]))
+                        reason = implausible(a, params[0], trace) or implausible(
+                            b, params[1], trace
+                        )
+                        if reason:
+                            row["rejected"] = reason
+                            continue
                         if dbic < -MIN_DELTA_BIC and gain >= MIN_REDUCTION and earns:
-                            params = (terms[a][1](coef[0]), terms[b][1](coef[1]))
                             pair = ((a, params[0], single[a]), (b, params[1], rmse1))
                             qualified.append((gain, pair, None, new, rmse0, rmse1, dbic, 2))
         adhesion_candidates = (
@@ -546,7 +676,7 @@ def discover(trace: Trace) -> Result:
             ("position", "adhesion_position", 2),
         )
         for key, cat, k in adhesion_candidates:
-            if adhesion[key] or math.isnan(adh_rmse):
+            if adhesion[key] or math.isnan(adh_rmse) or not health["adhesion_fit_kN"]["usable"]:
                 continue
             trial = dict(adhesion, **{key: True})
             fit, step_m, trial_recovery = _fit_extension(
@@ -576,6 +706,10 @@ def discover(trace: Trace) -> Result:
                     params["bogie_pitch_kN_per_mps2"] = pitch[0]
                 else:
                     params.update({"step_position_m": step_m, "factor_beyond_step": segs[0]})
+                reason = implausible(cat, params, trace)
+                if reason:
+                    row["rejected"] = reason
+                    continue
                 qualified.append(
                     (gain, key, params, (fit.chi2, trial_recovery), adh_rmse, rmse1, dbic, k)
                 )
@@ -637,6 +771,17 @@ def discover(trace: Trace) -> Result:
                 m = masks[ch]
                 result.errors_after[ch] = float(np.sqrt(np.mean(residual[ch][m] ** 2)))
         result.added.append(step)
+    bal = "train_speed_balance_kmh"
+    if any(st.channel == bal for st in result.added):
+        residual[bal] = _retest_balance(trace, result, chans[bal].residual, masks[bal])
+        result.errors_after[bal] = float(np.sqrt(np.mean(residual[bal][masks[bal]] ** 2)))
+    for st in result.added:
+        floor = floors.get(st.channel, float("nan"))
+        st.confidence.setdefault("delta_bic", st.delta_bic)
+        st.confidence["cut_pct"] = 100.0 * (1.0 - st.after / st.before) if st.before else 0.0
+        st.confidence["cut_over_noise_floor"] = (
+            (st.before - st.after) / floor if floor and math.isfinite(floor) else float("nan")
+        )
     for ch, floor in floors.items():
         m = masks[ch]
         if m.sum() >= 10:

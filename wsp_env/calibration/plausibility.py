@@ -1,0 +1,143 @@
+"""What the calibration loop may believe: physical bounds on every effect's parameters, and
+which residual channels are fit to choose an effect on.
+
+A least-squares fit always returns *a* number. A ground-speed scale error of -16 % or a wheel
+12 % off its nominal radius fits some residual, but no train runs with such a sensor or wheel;
+accepting it makes the next effect compensate for it. Each bound below is the edge of what a
+vehicle in service can have, with its reason; a candidate whose fit lands outside is rejected
+(and listed among the candidates with the reason), never added.
+
+A channel whose RMSE is NaN (no samples to score) or whose values lie far outside any physical
+range (a unit or channel-mapping fault, not an effect) is reported with its reason and never
+used to choose an effect.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from wsp_env.calibration.traces import Trace
+
+G = 9.80665
+
+# bound, reason — the reason is printed with the rejected value
+GRADIENT_MAX_PERMILLE = 40.0  # steepest main lines: 35-40 permille (Cologne-Frankfurt 40)
+SPEED_SCALE_MAX = 0.05  # radar / GPS / tachometer-based ground speed: calibrated to ~1-2 %
+SPEED_LAG_MAX_S = 2.0  # a GPS fix held for a second, filtered: beyond 2 s no speed display works
+RADIUS_ERROR_MAX = 0.06  # wear from 920 to ~860 mm diameter; beyond, the wheel is scrapped
+PAD_SCALE_RANGE = (0.5, 1.6)  # organic / sintered pads: mu 0.25-0.45 against a nominal ~0.35
+PRESSURE_LAG_MAX_S = 1.0  # pipe and cylinder filling behind the sensor: tenths of a second
+UNMEASURED_FORCE_MAX_G = 0.15  # a magnetic-track brake: ~0.1 g of the vehicle's weight
+RESISTANCE_MAX_G = 0.03  # a train's running resistance at 200 km/h: ~1-2 % of its weight
+PITCH_HEIGHT_RATIO_MAX = 1.0  # bogie pitch k = (bogie's share of the mass) h / b: h < b
+
+COASTING_CREEP_MAX_PCT = 8.0  # a rolling wheel reads at most radius + sensor errors off
+
+
+def implausible(category: str, params: dict[str, float], trace: Trace) -> str | None:
+    """The reason a fitted effect cannot be physical on this vehicle, or ``None``."""
+    mass = float(trace.vehicle["mass_kg"])
+    weight = mass * G
+    for key, value in params.items():
+        if not math.isfinite(float(value)):
+            return f"{key} is not finite"
+    if "gradient_permille" in params and abs(params["gradient_permille"]) > GRADIENT_MAX_PERMILLE:
+        return (
+            f"gradient {params['gradient_permille']:.1f} permille: beyond the "
+            f"{GRADIENT_MAX_PERMILLE:g} permille of the steepest main lines"
+        )
+    if "speed_scale_error" in params and abs(params["speed_scale_error"]) > SPEED_SCALE_MAX:
+        return (
+            f"ground-speed scale {100 * params['speed_scale_error']:+.1f} %: no speed sensor in "
+            f"service is more than {100 * SPEED_SCALE_MAX:g} % off"
+        )
+    if "speed_lag_s" in params and not 0.0 < params["speed_lag_s"] <= SPEED_LAG_MAX_S:
+        return f"ground-speed lag {params['speed_lag_s']:.2f} s outside (0, {SPEED_LAG_MAX_S:g}] s"
+    if category == "wheel_radius":
+        worst = max(abs(v) for k, v in params.items() if k.endswith("_radius_error"))
+        if worst > RADIUS_ERROR_MAX:
+            return (
+                f"wheel radius {100 * worst:.1f} % off nominal: beyond the "
+                f"{100 * RADIUS_ERROR_MAX:g} % a wheel may wear before it is scrapped"
+            )
+    if category == "pad_friction":
+        lo, hi = PAD_SCALE_RANGE
+        scale = np.asarray(params.get("scale", 1.0), dtype=float)
+        if "slope_per_mps" in params:
+            v = trace.v_train_kmh[trace.v_train_kmh > 10.0] / 3.6 - 100.0 / 3.6
+            scale = scale + params["slope_per_mps"] * (v if v.size else np.zeros(1))
+        if np.any(scale < lo) or np.any(scale > hi):
+            return (
+                f"pad friction x{float(np.min(scale)):.2f}..{float(np.max(scale)):.2f} of nominal: "
+                f"outside the {lo:g}-{hi:g} that pad materials span"
+            )
+    if "force_at_full_demand_N" in params:
+        if abs(params["force_at_full_demand_N"]) > UNMEASURED_FORCE_MAX_G * weight:
+            return (
+                f"unmeasured force {params['force_at_full_demand_N'] / 1e3:.1f} kN: beyond "
+                f"{UNMEASURED_FORCE_MAX_G:g} g of the vehicle's weight (a track brake's)"
+            )
+    if "lag_s" in params and not 0.0 < params["lag_s"] <= PRESSURE_LAG_MAX_S:
+        return f"pressure lag {params['lag_s']:.2f} s outside (0, {PRESSURE_LAG_MAX_S:g}] s"
+    if category == "running_resistance":
+        v = np.linspace(0.0, float(np.nanmax(trace.v_train_kmh)) / 3.6, 20)
+        delta = params.get("delta_a_N", 0.0) + params.get("delta_c_N_per_mps2", 0.0) * v * v
+        res = trace.vehicle.get("resistance") or {}
+        nominal = float(res.get("a_N", 0.0)) + v * (
+            float(res.get("b_N_per_mps", 0.0)) + v * float(res.get("c_N_per_mps2", 0.0))
+        )
+        if np.any(np.abs(delta) > RESISTANCE_MAX_G * weight):
+            return (
+                f"running resistance off by up to {np.max(np.abs(delta)) / 1e3:.1f} kN: beyond "
+                f"{100 * RESISTANCE_MAX_G:g} % of the vehicle's weight"
+            )
+        if np.any(nominal + delta < -0.002 * weight):
+            return "running resistance would turn into a propelling force"
+    if "bogie_pitch_kN_per_mps2" in params:
+        bogie_mass = 2.0 * mass / max(trace.n_axles, 1)  # two axles per bogie
+        if abs(params["bogie_pitch_kN_per_mps2"]) * 1e3 > PITCH_HEIGHT_RATIO_MAX * bogie_mass:
+            return (
+                f"bogie pitch {params['bogie_pitch_kN_per_mps2']:.1f} kN per m/s^2: the pivot "
+                "would stand higher than the wheelbase is long"
+            )
+    return None
+
+
+def channel_health(trace: Trace, chans: dict[str, Any]) -> dict[str, dict[str, Any]]:
+    """Per channel: its RMSE, whether it may choose an effect, and why not."""
+    out: dict[str, dict[str, Any]] = {}
+    for name, ch in chans.items():
+        n = int(np.sum(ch.mask))
+        reason = ""
+        if not math.isfinite(ch.rmse):
+            reason = {
+                "train_speed_balance_kmh": "no sample above 10 km/h with every wheel turning",
+                "adhesion_fit_kN": (
+                    "no adhesion evidence: fewer than 10 critical points above 10 km/h "
+                    "(the wheels hardly slid) or the law fit failed"
+                ),
+                "coasting_creep_pct": (
+                    "no unbraked sample above 10 km/h (no coasting lead-in in the record)"
+                ),
+            }.get(name, "no samples")
+        elif name == "coasting_creep_pct":
+            worst = float(np.max(np.abs(np.mean(np.where(ch.mask, ch.residual, 0.0), axis=0)
+                                        / np.maximum(ch.mask.mean(axis=0), 1e-9))))  # fmt: skip
+            if worst > COASTING_CREEP_MAX_PCT:
+                reason = (
+                    f"rolling wheels read {worst:.1f} % off the ground speed: beyond any radius "
+                    "or sensor error a train runs with (units? channel mapping?)"
+                )
+        out[name] = {
+            "rmse": ch.rmse,
+            "samples": n,
+            "usable": reason == "",
+            "reason": reason,
+        }
+    return out
+
+
+__all__ = ["channel_health", "implausible"]
