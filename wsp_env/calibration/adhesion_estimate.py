@@ -61,6 +61,7 @@ TURNING_SIGNIFICANCE = 3.0  # a turning point's curvature against the sensor noi
 SPEED_RESOLUTION_KMH = 0.01  # floor of the speed-noise estimate (logger resolution)
 FORCE_REL_ERROR = 0.02  # relative force error beyond sensor noise (unknown load distribution)
 REWEIGHT = 2
+CENSOR_SHARE = 0.5  # censored bounds weigh at most half as much as the critical points
 
 
 @dataclass
@@ -233,6 +234,92 @@ def estimate_adhesion(trace: Trace, min_speed_kmh: float = 20.0) -> list[Critica
     return out
 
 
+# ---- censored evidence: what rolling wheels prove about the rail ----------------------------
+
+CENSOR_BIN_M = 25.0  # one bound per axle and this much rail: the binding (largest) one
+CENSOR_MIN_TORQUE = 0.3  # of the axle's largest torque: a real brake demand, not a release
+CENSOR_ROLL_KMH = 0.5  # rolling: |V - v| below this (or 4 sensor sigmas) here and either side
+
+
+@dataclass
+class CensoredPoints:
+    """Braked samples where a wheel rolled with the train: the rail offered *at least* the force
+    the wheel transmitted (``force_N``), whatever the law says — a lower bound on the available
+    adhesion at that rail position and speed (issue 11, item 3). Where the rail gets better and
+    the wheels stop sliding, these are the only adhesion evidence left."""
+
+    sample: np.ndarray
+    axle: np.ndarray
+    position_m: np.ndarray
+    speed_kmh: np.ndarray
+    force_N: np.ndarray
+    normal_N: np.ndarray
+    decel_mps2: np.ndarray
+    sigma_force_N: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.sample.size)
+
+
+def censored_points(trace: Trace, min_speed_kmh: float = 20.0) -> CensoredPoints:
+    """Per axle and ``CENSOR_BIN_M`` of rail, the braked rolling sample with the largest used
+    adhesion: ``F = (T - J a / r) / r`` (the wheelset equation of a wheel decelerating with the
+    train), the brake torque at least ``CENSOR_MIN_TORQUE`` of the axle's largest, the wheel
+    within ``max(CENSOR_ROLL_KMH, 4 sigma)`` of the train speed at the sample and both
+    neighbours, above ``min_speed_kmh``."""
+    veh = trace.vehicle
+    r = float(veh["wheel_radius_m"])
+    inertia = float(veh.get("wheelset_inertia_kgm2", 0.0))
+    torques = trace.brake_torque_Nm()
+    gains = trace.axle_torque_gains()
+    t = trace.time_s
+    v_kmh = trace.v_train_kmh
+    decel = train_deceleration(trace)
+    normal = normal_loads(trace, decel)
+    x_m = cumulative_trapezoid(v_kmh / 3.6, t, initial=0.0)
+    sigma_p = noise_std(trace.p_cyl_bar)
+    parts = []
+    for i in range(trace.n_axles):
+        torque = torques[:, i]
+        slide = v_kmh - trace.v_axle_kmh[:, i]
+        sigma_kmh = max(noise_std(trace.v_axle_kmh[:, i]), noise_std(v_kmh), SPEED_RESOLUTION_KMH)
+        band = np.abs(slide) < max(CENSOR_ROLL_KMH, 4.0 * sigma_kmh)
+        rolling = np.zeros_like(band)
+        rolling[1:-1] = band[1:-1] & band[:-2] & band[2:]
+        top = float(torque.max()) if torque.size else 0.0
+        keep = rolling & (torque > CENSOR_MIN_TORQUE * top) & (v_kmh > min_speed_kmh) & (top > 0)
+        k = np.flatnonzero(keep)
+        if k.size == 0:
+            continue
+        force = (torque[k] - inertia * decel[k] / r) / r
+        mu = force / normal[k, i]
+        bins = np.floor(x_m[k] / CENSOR_BIN_M).astype(int)
+        best: dict[int, int] = {}
+        for j, b in enumerate(bins):
+            if b not in best or mu[j] > mu[best[b]]:
+                best[b] = j
+        sel = np.array(sorted(best.values()), dtype=int)
+        kk = k[sel]
+        sigma = np.hypot(float(gains[i]) * sigma_p / r, FORCE_REL_ERROR * np.abs(force[sel]))
+        parts.append((kk, np.full(kk.size, i), x_m[kk], v_kmh[kk], force[sel], normal[kk, i],
+                      decel[kk], sigma))  # fmt: skip
+    if not parts:
+        empty = np.zeros(0)
+        return CensoredPoints(empty.astype(int), empty.astype(int), *[empty] * 6)
+    cols = [np.concatenate(c) for c in zip(*parts, strict=True)]
+    return CensoredPoints(*cols)
+
+
+PEAK_CREEP_GRID = np.logspace(-4.0, -0.3, 48)
+
+
+def eq9_peak(speed_kmh: np.ndarray, mu0: float, K: float, k_rozv: float) -> np.ndarray:
+    """The largest adhesion Eq. 9 offers at each train speed (over the creepage, ``DV = xi V``)."""
+    xi = PEAK_CREEP_GRID[None, :]
+    v = np.asarray(speed_kmh, dtype=float)[:, None]
+    return eq9(xi, xi * v, mu0, K, k_rozv).max(axis=1)
+
+
 def pooled_points(trace: Trace, min_speed_kmh: float = 20.0) -> CriticalPoints:
     """Every axle's critical points in one set (``axle`` tells them apart)."""
     return CriticalPoints.concatenate(estimate_adhesion(trace, min_speed_kmh))
@@ -274,16 +361,26 @@ class LawFit:
     sigma_kN: np.ndarray  # effective standard error per point
     at_bound: bool  # an extension parameter ran to its bound (not identified)
     n_law: int = 3  # parameters of the law itself (4 with recovery)
+    # censored bounds the law violates: used force - the law's peak force where > 0, else 0
+    censored_kN: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))
+    censored_sigma_kN: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))
 
     @property
     def rmse(self) -> float:
-        """Weighted RMS residual (kN): ``sqrt(sum (r/s)^2 / sum 1/s^2)``."""
+        """Weighted RMS residual (kN): ``sqrt(sum (r/s)^2 / sum 1/s^2)`` over the critical
+        points and the censored bounds the law violates."""
         w = 1.0 / self.sigma_kN**2
-        return float(np.sqrt(np.sum(w * self.residual_kN**2) / np.sum(w)))
+        hit = self.censored_kN > 0.0
+        wc = 1.0 / self.censored_sigma_kN[hit] ** 2
+        num = np.sum(w * self.residual_kN**2) + np.sum(wc * self.censored_kN[hit] ** 2)
+        return float(np.sqrt(num / (np.sum(w) + np.sum(wc))))
 
     @property
     def chi2(self) -> float:
-        return float(np.sum((self.residual_kN / self.sigma_kN) ** 2))
+        return float(
+            np.sum((self.residual_kN / self.sigma_kN) ** 2)
+            + np.sum((self.censored_kN / np.maximum(self.censored_sigma_kN, 1e-12)) ** 2)
+        )
 
 
 BASE_START, BASE_LOW, BASE_HIGH = [0.1, 30.0, 0.02], [0.005, 0.5, 0.0], [1.0, 1e4, 1.0]
@@ -302,6 +399,8 @@ def fit_law(
     high: list[float] | None = None,
     removed: np.ndarray | None = None,
     law_start: np.ndarray | None = None,
+    censored: CensoredPoints | None = None,
+    censored_factor_of: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> LawFit | None:
     """Eq. 9 for every point, times ``factor_of(extra_params)`` (a per-point multiplier on
     the force, ``None``: 1), by effective-variance weighted least squares (module docstring).
@@ -313,6 +412,10 @@ def fit_law(
     the wheel that slides, as in the simulator) — with ``g`` a fourth law parameter in [1, 2]
     (fitted from two starts: the blend makes the problem multimodal). ``law_start``: the law's
     parameters to start from (one start; an extension starts from the fitted base law).
+    ``censored`` (``censored_points``): lower bounds — the law's peak at each bound's speed,
+    times ``censored_factor_of`` (the extensions' factor there), must reach the force a rolling
+    wheel transmitted; a shortfall enters the least squares as a one-sided residual (weighted
+    by the bound's error, at most ``CENSOR_SHARE`` of the points' weight in all).
     Returns ``None`` with fewer than 5 points."""
     if len(pts) < 5:
         return None
@@ -323,6 +426,23 @@ def fit_law(
     lo = np.array(BASE_LOW + rec_low + list(low or []), dtype=float)
     hi = np.array(BASE_HIGH + rec_high + list(high or []), dtype=float)
     scale = np.concatenate([[0.05, 30.0, 0.02], [0.25] * (n_law - 3), np.ones(n_extra)])
+
+    n_cens = 0 if censored is None else len(censored)
+    if n_cens:
+        c_force = censored.force_N / 1e3
+        c_normal = censored.normal_N / 1e3
+        c_sigma = censored.sigma_force_N / 1e3
+        # many bounds on one rail must not outvote the points: cap their total weight
+        share = CENSOR_SHARE * len(pts) / max(n_cens, 1)
+        c_sigma = c_sigma / np.sqrt(min(share, 1.0))
+
+    def shortfall(p: np.ndarray) -> np.ndarray:
+        if not n_cens:
+            return np.zeros(0)
+        peak = eq9_peak(censored.speed_kmh, *p[:3]) * c_normal
+        if censored_factor_of is not None:
+            peak = peak * censored_factor_of(p[n_law:])
+        return np.maximum(c_force - peak, 0.0)
 
     def model(p: np.ndarray) -> np.ndarray:
         mu = eq9(pts.creepage, pts.sliding_kmh, *p[:3])
@@ -345,7 +465,14 @@ def fit_law(
         for _ in range(REWEIGHT + 1):
             s = sigma
             sol = least_squares(
-                lambda p, s=s: (model(p) - force) / s, p0, bounds=(lo, hi), x_scale=scale
+                lambda p, s=s: (
+                    np.concatenate([(model(p) - force) / s, shortfall(p) / c_sigma])
+                    if n_cens
+                    else (model(p) - force) / s
+                ),
+                p0,
+                bounds=(lo, hi),
+                x_scale=scale,
             )
             p0 = sol.x
             mult = factor_of(p0[n_law:]) if factor_of is not None else 1.0
@@ -358,6 +485,8 @@ def fit_law(
         span = hi - lo
         hit = (np.abs(p0 - lo) < 1e-4 * span) | (np.abs(p0 - hi) < 1e-4 * span)
         fit = LawFit(p0, force - model(p0), s, bool(hit[n_law:].any()), n_law)
+        if n_cens:
+            fit.censored_kN, fit.censored_sigma_kN = shortfall(p0), c_sigma
         if best is None or fit.chi2 < best.chi2:
             best = fit
     return best
@@ -399,18 +528,20 @@ class BaseLaw:
     removed: np.ndarray | None  # per point, the filtered removed fraction
 
 
-def fit_base_law(trace: Trace, pts: CriticalPoints) -> BaseLaw | None:
+def fit_base_law(
+    trace: Trace, pts: CriticalPoints, censored: CensoredPoints | None = None
+) -> BaseLaw | None:
     """Eq. 9 alone, or with recovery (``RECOVERY_GRID_KW``; the best by chi-square) if that
     lowers the BIC by ``RECOVERY_MIN_DELTA_BIC`` (three more parameters: W_lim, W_max,
     mu_rec / mu0). No bar on the RMSE cut: a strong effect elsewhere in the data (per-axle
     adhesion, say) dilutes the cut that recovery alone brings, not its evidence."""
-    plain = fit_law(pts)
+    plain = fit_law(pts, censored=censored)
     if plain is None:
         return None
     best: BaseLaw | None = None
     for w_lim, w_span in RECOVERY_GRID_KW:
         removed = removed_fraction(trace, w_lim, w_span)[pts.sample, pts.axle]
-        fit = fit_law(pts, removed=removed)
+        fit = fit_law(pts, removed=removed, censored=censored)
         if fit is not None and (best is None or fit.chi2 < best.fit.chi2):
             best = BaseLaw(fit, (w_lim, w_span), removed)
     n = len(pts)

@@ -49,8 +49,10 @@ import numpy as np
 
 from wsp_env.calibration.adhesion_estimate import (
     RECOVERY_GRID_KW,
+    CensoredPoints,
     CriticalPoints,
     LawFit,
+    censored_points,
     fit_law,
     noise_std,
     pooled_points,
@@ -273,20 +275,62 @@ PAIR_NAMES = {
 
 
 def _fit_radius(trace, residual, mask):
-    res = residual.copy()
-    params = {}
-    for i in range(residual.shape[1]):
-        m = mask[:, i]
-        offset = float(residual[m, i].mean()) if m.any() else 0.0
-        res[:, i] = residual[:, i] - offset
+    """One axle's radius against the others: its coasting creep less the median of the axles
+    coasting at the same sample. The ground-speed sensor's noise, lag and scale are common to
+    every axle and cancel in that difference, so a wheel's offset is judged against the axle
+    sensors' noise alone, averaged over every coasting sample — what makes a 0.5 s lead-in
+    usable. An axle qualifies when its mean offset stands ``RADIUS_Z_MIN`` standard errors
+    out (robust scatter of the differences); the others keep radius error 0. A radius error
+    common to every axle is a ground-speed scale to this channel (``_fit_sensor_coasting``).
+    Returns the parameters, the residual less the offsets and the test's statistics."""
+    n_ax = residual.shape[1]
+    if n_ax < 3:
+        return None
+    vals = np.where(mask, residual, np.nan)
+    rows = mask.sum(axis=1) >= 3
+    ref = np.full(len(residual), np.nan)
+    ref[rows] = np.nanmedian(vals[rows], axis=1)
+    diff = vals - ref[:, None]
+    params: dict[str, float] = {}
+    offsets = np.zeros(n_ax)
+    z = np.zeros(n_ax)
+    for i in range(n_ax):
+        d = diff[:, i][np.isfinite(diff[:, i])]
+        if d.size < RADIUS_MIN_SAMPLES:
+            continue
+        mean = float(d.mean())
+        scatter = max(1.4826 * float(np.median(np.abs(d - np.median(d)))), RADIUS_MIN_SCATTER_PCT)
+        z[i] = mean / (scatter / math.sqrt(d.size))
+        if abs(z[i]) >= RADIUS_Z_MIN:
+            offsets[i] = mean
+    if not offsets.any():
+        return None
+    for i in range(n_ax):
         # apparent creep 100 (V - v/(1+e)) / V ~ 100 e / (1 + e)
-        params[f"axle_{i + 1}_radius_error"] = offset / (100.0 - offset)
-    return params, res
+        params[f"axle_{i + 1}_radius_error"] = offsets[i] / (100.0 - offsets[i])
+    new = residual - offsets[None, :]
+    ok = np.isfinite(diff)
+    rss0 = float(np.sum(diff[ok] ** 2))
+    rss1 = float(np.sum((diff - offsets[None, :])[ok] ** 2))
+    n, k = int(ok.sum()), int(np.count_nonzero(offsets))
+    stats = {
+        "delta_bic": _bic(rss1, n, k) - _bic(rss0, n, 0),
+        "k": k,
+        "gain": 1.0 - math.sqrt(rss1 / max(rss0, 1e-300)),
+        "z_max": float(np.max(np.abs(z))),
+    }
+    return params, new, stats
 
 
 def _fit_sensor_coasting(trace, residual, mask):
     offset = float(residual[mask].mean()) if mask.any() else 0.0
     return {"speed_scale_error": offset / 100.0}, residual - offset
+
+
+# an axle's coasting offset must stand this many standard errors out of the axle sensors' noise
+RADIUS_Z_MIN = 6.0
+RADIUS_MIN_SAMPLES = 4
+RADIUS_MIN_SCATTER_PCT = 0.01  # the speed loggers' resolution, in creep %
 
 
 # ---- adhesion fit --------------------------------------------------------------------------
@@ -315,19 +359,20 @@ def fit_adhesion_model(
     pts: CriticalPoints | None = None,
     removed: np.ndarray | None = None,
     law_start: np.ndarray | None = None,
+    censored: CensoredPoints | None = None,
 ) -> LawFit | None:
     """One Eq. 9 law for all axles' critical points (``pts``, default: the trace's; with the
     base law's recovery when ``removed`` is given, see ``adhesion_estimate.fit_law``), times the
     chosen extensions' factors: a friction factor per axle (axle 1 = 1), a bogie-pitch load
     transfer ``+- k a`` on the leading / trailing axle of each bogie (consecutive pairs), a
-    friction factor on the rail beyond ``step_m`` (position of the rail under the axle)."""
+    friction factor on the rail beyond ``step_m`` (position of the rail under the axle).
+    ``censored``: the rolling wheels' lower bounds on the adhesion (``censored_points``), under
+    the same factors."""
     if pts is None:
         pts = pooled_points(trace, MIN_SPEED_KMH)
     if len(pts) < 10:
         return None
     n_ax = trace.n_axles - 1
-    lead = np.where(pts.axle % 2 == 0, 1.0, -1.0)
-    rail_m = pts.position_m - _axle_offsets_m(trace)[pts.axle]
     start: list[float] = []
     low: list[float] = []
     high: list[float] = []
@@ -337,24 +382,34 @@ def fit_adhesion_model(
         start, low, high = [*start, 0.0], [*low, -50.0], [*high, 50.0]
     if step_m is not None:
         start, low, high = [*start, 1.0], [*low, 0.2], [*high, 5.0]
-    beyond = rail_m > (step_m if step_m is not None else np.inf)
+    offsets = _axle_offsets_m(trace)
 
-    def factor_of(p: np.ndarray) -> np.ndarray:
-        j = 0
-        out = np.ones(len(pts))
-        if per_axle:
-            out = out * np.concatenate([[1.0], p[:n_ax]])[pts.axle]
-            j = n_ax
-        if load_transfer:  # (N + k a) / N
-            out = out * (1.0 + p[j] * 1e3 * lead * pts.decel_mps2 / pts.normal_N)
-            j += 1
-        if step_m is not None:
-            out = np.where(beyond, out * p[j], out)
-        return out
+    def factors_for(points: Any) -> Callable[[np.ndarray], np.ndarray]:
+        """The extensions' force factor at each of ``points`` (critical or censored)."""
+        lead = np.where(points.axle % 2 == 0, 1.0, -1.0)
+        rail_m = points.position_m - offsets[points.axle]
+        beyond = rail_m > (step_m if step_m is not None else np.inf)
+
+        def factor_of(p: np.ndarray) -> np.ndarray:
+            j = 0
+            out = np.ones(len(points))
+            if per_axle:
+                out = out * np.concatenate([[1.0], p[:n_ax]])[points.axle]
+                j = n_ax
+            if load_transfer:  # (N + k a) / N
+                out = out * (1.0 + p[j] * 1e3 * lead * points.decel_mps2 / points.normal_N)
+                j += 1
+            if step_m is not None:
+                out = np.where(beyond, out * p[j], out)
+            return out
+
+        return factor_of
 
     extended = per_axle or load_transfer or step_m is not None
-    factors = factor_of if extended else None
-    return fit_law(pts, factors, len(start), start, low, high, removed, law_start)
+    factors = factors_for(pts) if extended else None
+    c_factors = factors_for(censored) if extended and censored is not None else None
+    return fit_law(pts, factors, len(start), start, low, high, removed, law_start, censored,
+                   c_factors)  # fmt: skip
 
 
 def fit_adhesion_step(
@@ -364,16 +419,20 @@ def fit_adhesion_step(
     pts: CriticalPoints,
     removed: np.ndarray | None = None,
     law_start: np.ndarray | None = None,
+    censored: CensoredPoints | None = None,
 ) -> tuple[LawFit | None, float]:
     """The adhesion model with a friction step on the rail, the step's position chosen on a
-    grid of the critical points' positions (best weighted fit)."""
+    grid of the positions with adhesion evidence — critical points and censored bounds, so a
+    rail that gets better and stops the slides is seen (best weighted fit)."""
     x = pts.position_m
     if x.size < 10:
         return None, float("nan")
+    if censored is not None and len(censored):
+        x = np.concatenate([x, censored.position_m])
     best: tuple[LawFit | None, float] = (None, float("nan"))
     for step_m in x.min() + STEP_FRACTIONS * (x.max() - x.min()):
         fit = fit_adhesion_model(
-            trace, per_axle, load_transfer, float(step_m), pts, removed, law_start
+            trace, per_axle, load_transfer, float(step_m), pts, removed, law_start, censored
         )
         if fit is not None and (best[0] is None or fit.chi2 < best[0].chi2):
             best = (fit, float(step_m))
@@ -387,6 +446,7 @@ def _fit_extension(
     removed: np.ndarray | None,
     law_start: np.ndarray | None,
     recovery_grid: dict[tuple[float, float], np.ndarray],
+    censored: CensoredPoints | None = None,
 ) -> tuple[LawFit | None, float, tuple[float, float] | None]:
     """The adhesion model with the extensions in ``trial``; returns the fit, the step position
     (NaN without one) and the recovery's (W_lim, W_max - W_lim) in kW it used (``None``: the
@@ -399,22 +459,24 @@ def _fit_extension(
     step_m = float("nan")
     if trial["position"]:
         fit, step_m = fit_adhesion_step(
-            trace, trial["per_axle"], trial["load_transfer"], pts, removed, law_start
+            trace, trial["per_axle"], trial["load_transfer"], pts, removed, law_start, censored
         )
         if fit is None:
             return None, step_m, None
     else:
         fit = fit_adhesion_model(
-            trace, trial["per_axle"], trial["load_transfer"], None, pts, removed, law_start
-        )
+            trace, trial["per_axle"], trial["load_transfer"], None, pts, removed, law_start,
+            censored,
+        )  # fmt: skip
     step = None if math.isnan(step_m) else step_m
     best: tuple[LawFit | None, tuple[float, float] | None] = (fit, None)
     for grid, other in recovery_grid.items():
         if other is removed:
             continue
         alt = fit_adhesion_model(
-            trace, trial["per_axle"], trial["load_transfer"], step, pts, other, law_start
-        )
+            trace, trial["per_axle"], trial["load_transfer"], step, pts, other, law_start,
+            censored,
+        )  # fmt: skip
         if alt is not None and (best[0] is None or alt.chi2 < best[0].chi2):
             best = (alt, grid)
     return best[0], step_m, best[1]
@@ -583,6 +645,7 @@ def discover(trace: Trace) -> Result:
     masks = {k: chans[k].mask for k in floors}
     adhesion = {"per_axle": False, "load_transfer": False, "position": False}
     points = pooled_points(trace, MIN_SPEED_KMH)  # shared by every adhesion candidate
+    bounds = censored_points(trace, MIN_SPEED_KMH)  # what rolling wheels prove (item 3)
     adh_rmse = chans["adhesion_fit_kN"].rmse
     adh_detail = chans["adhesion_fit_kN"].detail
     result.adhesion_law = {k: v for k, v in adh_detail.items() if k != "chi2"}
@@ -615,16 +678,20 @@ def discover(trace: Trace) -> Result:
                     continue
                 rss0 = float(np.sum(res[mask] ** 2))
                 rmse0 = math.sqrt(rss0 / n)
-                if rmse0 < NOISE_FACTOR * floors[ch]:
+                own_test = cand.category == "wheel_radius"  # judged on axle differences
+                if rmse0 < NOISE_FACTOR * floors[ch] and not own_test:
                     continue
                 fitted = cand.fit(trace, res, mask)
-                if fitted is None:  # contradicted by another channel
+                if fitted is None:  # contradicted by another channel, or nothing stands out
                     continue
-                params, new = fitted
+                params, new = fitted[:2]
                 rss1 = float(np.sum(new[mask] ** 2))
-                k = cand.n_params if cand.category != "wheel_radius" else trace.n_axles
+                k = cand.n_params
                 dbic = _bic(rss1, n, k) - _bic(rss0, n, 0)
                 rmse1 = math.sqrt(rss1 / n)
+                if own_test:
+                    stats = fitted[2]
+                    k, dbic = stats["k"], stats["delta_bic"]
                 row = {"name": cand.name, "category": cand.category, "channel": ch,
                        "before": rmse0, "after": rmse1, "delta_bic": dbic}  # fmt: skip
                 result.considered.append(row)
@@ -633,7 +700,10 @@ def discover(trace: Trace) -> Result:
                     row["rejected"] = reason
                     continue
                 gain = 1 - rmse1 / rmse0
-                if dbic < -MIN_DELTA_BIC and gain >= MIN_REDUCTION:
+                if own_test:
+                    row["z_max"] = stats["z_max"]
+                    gain = max(gain, stats["gain"])
+                if dbic < -MIN_DELTA_BIC and (gain >= MIN_REDUCTION or own_test):
                     qualified.append((gain, cand, params, new, rmse0, rmse1, dbic, k))
         ch = "train_speed_balance_kmh"
         res, mask = residual[ch], masks[ch]
@@ -680,7 +750,7 @@ def discover(trace: Trace) -> Result:
                 continue
             trial = dict(adhesion, **{key: True})
             fit, step_m, trial_recovery = _fit_extension(
-                trace, trial, points, removed, law_start, recovery_grid
+                trace, trial, points, removed, law_start, recovery_grid, bounds
             )
             if fit is None or fit.at_bound:  # not identified (a parameter ran to its bound)
                 continue

@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from wsp_env.calibration.adhesion_estimate import fit_base_law, pooled_points
+from wsp_env.calibration.adhesion_estimate import censored_points, fit_base_law, pooled_points
 from wsp_env.calibration.traces import Trace
 
 MIN_SPEED_KMH = 10.0
@@ -133,7 +133,7 @@ def adhesion_fit(trace: Trace) -> Channel:
     residual (kN) sits at each point's sample (``mask`` marks them). The RMSE is weighted by
     each point's effective variance (``adhesion_estimate``)."""
     pts = pooled_points(trace, MIN_SPEED_KMH)
-    base = fit_base_law(trace, pts)
+    base = fit_base_law(trace, pts, censored_points(trace, MIN_SPEED_KMH))
     residual = np.zeros_like(trace.p_cyl_bar)
     mask = np.zeros(residual.shape, dtype=bool)
     if base is None:
