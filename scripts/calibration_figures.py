@@ -156,19 +156,24 @@ def floors(directory: Path) -> None:
     print("3. injected effects: the first effect added, its parameters and its channel's cut")
     step = ((0.0, 500.0, 0.667), (500.0, 5000.0, 1.0))  # mu ~0.107 to 500 m, then 0.06
     ratios = {"axle_mu_factor": (0.6, 0.75, 0.9, 1.0)}
+    one_off = (1.0, 1.0, 0.6, 1.0)
     oil = load_rail("oil")
     injected = (
         ("soap, gradient -15 permille", uncleaned, {"gradient_permille": -15.0}),
         ("soap, R_i 0.6/0.75/0.9/1", uncleaned, ratios),
+        ("soap, axle 2 x0.6", uncleaned, {"axle_mu_factor": (1.0, 0.6, 1.0, 1.0)}),
         ("soap, friction step at 500 m", uncleaned, {"sections": step, "mu_contaminated": 0.06}),
         ("oil, R_i 0.6/0.75/0.9/1", oil, {**ratios, "mu_contaminated": 0.06}),
+        ("oil, axle 3 x0.6", oil, {"axle_mu_factor": one_off, "mu_contaminated": 0.06}),
         ("oil, CoG/pivot heights x4", oil, {"height_scale": 4.0, "mu_contaminated": 0.06}),
         ("oil, friction step at 500 m", oil, {"sections": step, "mu_contaminated": 0.06}),
     )
     for label, rail, effect in injected:
         res = _discover(directory, "effect", rail, **effect)
         if not res.added:
-            print(f"   {label:30s}: nothing added")
+            gain = res.adhesion_law.get("cleaning_gain")
+            law = f" (base law's cleaning gain {gain:.3f})" if gain is not None else ""
+            print(f"   {label:30s}: nothing added{law}")
             continue
         first = res.added[0]
         shown = {k: round(float(v), 3) for k, v in first.parameters.items()}

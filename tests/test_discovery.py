@@ -68,15 +68,17 @@ def test_rail_cleaning_is_reported_as_per_axle_adhesion(tmp_path, seed, speed):
             ("axle_2_radius_error", 0.01, 0.15),
         ),
         # on soap (the base law with recovery) and on oil (Eq. 9, no recovery)
+        # one axle off the others (a monotone rise along the train is the base law's cleaning:
+        # test_monotone_axle_factors_are_the_base_laws_cleaning)
         (
-            {"axle_mu_factor": (0.6, 0.75, 0.9, 1.0)},
+            {"axle_mu_factor": (1.0, 0.6, 1.0, 1.0)},
             "adhesion_per_axle",
-            ("axle_4_factor", 1 / 0.6, 0.15),
+            ("axle_2_factor", 0.6, 0.1),
         ),
         (
-            {"axle_mu_factor": (0.6, 0.75, 0.9, 1.0), "rail": OIL},
+            {"axle_mu_factor": (1.0, 1.0, 0.6, 1.0), "rail": OIL},
             "adhesion_per_axle",
-            ("axle_4_factor", 1 / 0.6, 0.15),
+            ("axle_3_factor", 0.6, 0.1),
         ),
         ({"resistance_scale": 3.0}, "running_resistance", ("delta_a_N", 1300.0, 0.25)),
         (
@@ -118,6 +120,18 @@ def test_undeclared_effect_is_named(tmp_path, effect, category, check):
     assert step.after <= 0.5 * step.before
     if category == "adhesion_position":
         assert step.parameters["step_position_m"] == pytest.approx(500.0, abs=40.0)
+
+
+@pytest.mark.parametrize("rail", [SOAP, OIL])
+def test_monotone_axle_factors_are_the_base_laws_cleaning(tmp_path, rail):
+    """Seed 002's R_i (0.6 / 0.75 / 0.9 / 1 from axle 1 to 4) is what cleaning along the train
+    looks like: the base law carries it (DESIGN §3) and no effect is added; its gain, the
+    rear's over the front's less one, comes back within 25 % of 1 / 0.6 - 1 (the law's
+    saturating shape is not the injected linear one)."""
+    result = discover(read_trace(_trace(tmp_path, "ri", rail=rail,
+                                        axle_mu_factor=(0.6, 0.75, 0.9, 1.0))))  # fmt: skip
+    assert result.added == []
+    assert result.adhesion_law["cleaning_gain"] == pytest.approx(1 / 0.6 - 1, rel=0.25)
 
 
 def test_two_effects_at_once(tmp_path):

@@ -339,7 +339,9 @@ def _print_calibrate(result: dict[str, Any]) -> None:
     for e in result["added_effects"]:
         params = ", ".join(f"{k} {v:.4g}" for k, v in e["parameters"].items())
         change = f"{e['before']:.3f} -> {e['after']:.3f}"
-        print(f"  added {e['category']} on {e['channel']}: {change} ({params})")
+        alt = e.get("alternatives") or []
+        also = f"; as well explained by {', '.join(alt)}" if alt else ""
+        print(f"  added {e['category']} on {e['channel']}: {change} ({params}{also})")
     for d in result.get("dropped_effects", []):
         print(f"  dropped {d['category']}: {d['reason']}")
     for name, h in result.get("channels", {}).items():

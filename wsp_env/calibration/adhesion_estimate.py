@@ -401,6 +401,7 @@ def fit_law(
     law_start: np.ndarray | None = None,
     censored: CensoredPoints | None = None,
     censored_factor_of: Callable[[np.ndarray], np.ndarray] | None = None,
+    reweight: int = REWEIGHT,
 ) -> LawFit | None:
     """Eq. 9 for every point, times ``factor_of(extra_params)`` (a per-point multiplier on
     the force, ``None``: 1), by effective-variance weighted least squares (module docstring).
@@ -416,6 +417,7 @@ def fit_law(
     times ``censored_factor_of`` (the extensions' factor there), must reach the force a rolling
     wheel transmitted; a shortfall enters the least squares as a one-sided residual (weighted
     by the bound's error, at most ``CENSOR_SHARE`` of the points' weight in all).
+    ``reweight``: how often the weights follow the fitted slope (fewer: a quicker screening fit).
     Returns ``None`` with fewer than 5 points."""
     if len(pts) < 5:
         return None
@@ -462,7 +464,7 @@ def fit_law(
     for law0 in starts:
         p0 = np.array(law0 + list(start or []), dtype=float)
         sigma = pts.sigma_force_N / 1e3
-        for _ in range(REWEIGHT + 1):
+        for _ in range(reweight + 1):
             s = sigma
             sol = least_squares(
                 lambda p, s=s: (
@@ -526,6 +528,7 @@ class BaseLaw:
     fit: LawFit
     recovery_kW: tuple[float, float] | None  # (W_lim, W_max - W_lim), or None
     removed: np.ndarray | None  # per point, the filtered removed fraction
+    cleaning: bool = False  # the law carries the cleaning along the train (last parameter)
 
 
 def fit_base_law(
@@ -538,6 +541,7 @@ def fit_base_law(
     plain = fit_law(pts, censored=censored)
     if plain is None:
         return None
+    base = BaseLaw(plain, None, None)
     best: BaseLaw | None = None
     for w_lim, w_span in RECOVERY_GRID_KW:
         removed = removed_fraction(trace, w_lim, w_span)[pts.sample, pts.axle]
@@ -548,8 +552,36 @@ def fit_base_law(
     if best is not None:
         dbic = n * np.log(best.fit.chi2 / plain.chi2) + 3 * np.log(n)
         if dbic < -RECOVERY_MIN_DELTA_BIC:
-            return best
-    return BaseLaw(plain, None, None)
+            base = best
+    if trace.n_axles < 2:
+        return base
+    # cleaning along the train (DESIGN §3, seed 000 Table 4, seed 002 Fig. 8): one more parameter
+    cleaned = fit_law(
+        pts, cleaning_factor(pts.axle, trace.n_axles), 1, [0.1], [0.0], [CLEANING_MAX],
+        base.removed, None, censored, cleaning_factor(censored.axle, trace.n_axles)
+        if censored is not None else None,
+    )  # fmt: skip
+    if cleaned is not None and not cleaned.at_bound:
+        dbic = n * np.log(cleaned.chi2 / base.fit.chi2) + np.log(n)
+        if dbic < -RECOVERY_MIN_DELTA_BIC:
+            return BaseLaw(cleaned, base.recovery_kW, base.removed, cleaning=True)
+    return base
+
+
+CLEANING_MAX = 3.0  # the last axle's rail at most 4x the first's (contaminated -> clean soap)
+
+
+def cleaning_factor(axle: np.ndarray, n_axles: int) -> Callable[[np.ndarray], np.ndarray]:
+    """The rail the axles behind see, cleaned by those ahead: a friction factor
+    ``1 + c (1 - exp(-3 j / (n - 1)))`` on axle ``j`` (0 = leading), rising fastest behind the
+    first axles and levelling off along a long train; ``c`` the rear's gain (fitted, >= 0)."""
+    j = np.asarray(axle, dtype=float) / max(n_axles - 1, 1)
+    shape = (1.0 - np.exp(-3.0 * j)) / (1.0 - np.exp(-3.0))
+
+    def factor_of(p: np.ndarray) -> np.ndarray:
+        return 1.0 + p[-1] * shape
+
+    return factor_of
 
 
 def fit_polach(points: CriticalPoints) -> PolachFit:

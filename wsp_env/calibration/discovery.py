@@ -48,17 +48,19 @@ from typing import Any
 import numpy as np
 
 from wsp_env.calibration.adhesion_estimate import (
+    CLEANING_MAX,
     RECOVERY_GRID_KW,
+    REWEIGHT,
     CensoredPoints,
     CriticalPoints,
     LawFit,
     censored_points,
+    cleaning_factor,
     fit_law,
-    noise_std,
     pooled_points,
     removed_fraction,
 )
-from wsp_env.calibration.plausibility import channel_health, implausible
+from wsp_env.calibration.plausibility import channel_health, implausible, negligible
 from wsp_env.calibration.residuals import (
     MIN_SPEED_KMH,
     anchored,
@@ -106,6 +108,9 @@ class Step:
     # how sure: the BIC gain when added, the cut against the channel's noise floor, and the BIC
     # gain of keeping it once every other effect is in (the re-test, ``retest``)
     confidence: dict[str, float] = field(default_factory=dict)
+    # other effects that explained the channel as well (within the tie margin): the data alone
+    # cannot tell them apart (pads and an unmeasured brake force on a stop without WSP action)
+    alternatives: list[str] = field(default_factory=list)
 
     def as_dict(self) -> dict[str, Any]:
         return {
@@ -117,6 +122,7 @@ class Step:
             "after": self.after,
             "delta_bic": self.delta_bic,
             "confidence": self.confidence,
+            "alternatives": self.alternatives,
         }
 
 
@@ -135,6 +141,7 @@ class Result:
     channel_health: dict[str, dict[str, Any]] = field(default_factory=dict)
     # effects added and then dropped by the re-test, with the reason
     dropped: list[dict[str, Any]] = field(default_factory=list)
+    n_axles: int = 0
 
 
 # ---- linear fits on the balance channel ------------------------------------------------------
@@ -360,6 +367,8 @@ def fit_adhesion_model(
     removed: np.ndarray | None = None,
     law_start: np.ndarray | None = None,
     censored: CensoredPoints | None = None,
+    cleaning: bool = False,
+    reweight: int = REWEIGHT,
 ) -> LawFit | None:
     """One Eq. 9 law for all axles' critical points (``pts``, default: the trace's; with the
     base law's recovery when ``removed`` is given, see ``adhesion_estimate.fit_law``), times the
@@ -367,7 +376,8 @@ def fit_adhesion_model(
     transfer ``+- k a`` on the leading / trailing axle of each bogie (consecutive pairs), a
     friction factor on the rail beyond ``step_m`` (position of the rail under the axle).
     ``censored``: the rolling wheels' lower bounds on the adhesion (``censored_points``), under
-    the same factors."""
+    the same factors. ``cleaning``: the base law's cleaning along the train
+    (``adhesion_estimate.cleaning_factor``, its gain the last parameter) stays in the model."""
     if pts is None:
         pts = pooled_points(trace, MIN_SPEED_KMH)
     if len(pts) < 10:
@@ -382,6 +392,8 @@ def fit_adhesion_model(
         start, low, high = [*start, 0.0], [*low, -50.0], [*high, 50.0]
     if step_m is not None:
         start, low, high = [*start, 1.0], [*low, 0.2], [*high, 5.0]
+    if cleaning:
+        start, low, high = [*start, 0.1], [*low, 0.0], [*high, CLEANING_MAX]
     offsets = _axle_offsets_m(trace)
 
     def factors_for(points: Any) -> Callable[[np.ndarray], np.ndarray]:
@@ -401,15 +413,18 @@ def fit_adhesion_model(
                 j += 1
             if step_m is not None:
                 out = np.where(beyond, out * p[j], out)
+            if cleaning:
+                out = out * clean(p)
             return out
 
+        clean = cleaning_factor(points.axle, trace.n_axles)
         return factor_of
 
-    extended = per_axle or load_transfer or step_m is not None
+    extended = per_axle or load_transfer or step_m is not None or cleaning
     factors = factors_for(pts) if extended else None
     c_factors = factors_for(censored) if extended and censored is not None else None
     return fit_law(pts, factors, len(start), start, low, high, removed, law_start, censored,
-                   c_factors)  # fmt: skip
+                   c_factors, reweight)  # fmt: skip
 
 
 def fit_adhesion_step(
@@ -420,6 +435,7 @@ def fit_adhesion_step(
     removed: np.ndarray | None = None,
     law_start: np.ndarray | None = None,
     censored: CensoredPoints | None = None,
+    cleaning: bool = False,
 ) -> tuple[LawFit | None, float]:
     """The adhesion model with a friction step on the rail, the step's position chosen on a
     grid of the positions with adhesion evidence — critical points and censored bounds, so a
@@ -430,13 +446,19 @@ def fit_adhesion_step(
     if censored is not None and len(censored):
         x = np.concatenate([x, censored.position_m])
     best: tuple[LawFit | None, float] = (None, float("nan"))
-    for step_m in x.min() + STEP_FRACTIONS * (x.max() - x.min()):
+    for step_m in x.min() + STEP_FRACTIONS * (x.max() - x.min()):  # screened with one pass
         fit = fit_adhesion_model(
-            trace, per_axle, load_transfer, float(step_m), pts, removed, law_start, censored
-        )
+            trace, per_axle, load_transfer, float(step_m), pts, removed, law_start, censored,
+            cleaning, reweight=0,
+        )  # fmt: skip
         if fit is not None and (best[0] is None or fit.chi2 < best[0].chi2):
             best = (fit, float(step_m))
-    return best
+    if best[0] is None:
+        return best
+    final = fit_adhesion_model(
+        trace, per_axle, load_transfer, best[1], pts, removed, law_start, censored, cleaning
+    )
+    return final, best[1]
 
 
 def _fit_extension(
@@ -454,31 +476,43 @@ def _fit_extension(
 
     Where the base law recovers, its W_lim / W_max were chosen on data the extension's effect
     blurred (a step in the rail's friction moves the sliding power at which the slides recover):
-    the extended model re-chooses them on the same grid (``RECOVERY_GRID_KW``; no new parameter),
-    the step's position held where the base recovery put it."""
+    the extended model with a step re-chooses them on the same grid (``RECOVERY_GRID_KW``; no new
+    parameter), the step's position held where the base recovery put it."""
     step_m = float("nan")
+    clean = bool(trial.get("cleaning")) and not trial["per_axle"]  # per-axle factors replace it
     if trial["position"]:
         fit, step_m = fit_adhesion_step(
-            trace, trial["per_axle"], trial["load_transfer"], pts, removed, law_start, censored
-        )
+            trace, trial["per_axle"], trial["load_transfer"], pts, removed, law_start, censored,
+            clean,
+        )  # fmt: skip
         if fit is None:
             return None, step_m, None
     else:
         fit = fit_adhesion_model(
             trace, trial["per_axle"], trial["load_transfer"], None, pts, removed, law_start,
-            censored,
+            censored, clean,
         )  # fmt: skip
     step = None if math.isnan(step_m) else step_m
     best: tuple[LawFit | None, tuple[float, float] | None] = (fit, None)
-    for grid, other in recovery_grid.items():
+    # only a step moves where the slides recover (per-axle factors and load transfer scale
+    # the force, not the sliding power's threshold): the re-choice is the step's alone
+    screened: tuple[float, tuple[float, float] | None] = (math.inf, None)
+    for grid, other in recovery_grid.items() if trial["position"] else ():
         if other is removed:
             continue
         alt = fit_adhesion_model(
             trace, trial["per_axle"], trial["load_transfer"], step, pts, other, law_start,
-            censored,
+            censored, clean, reweight=0,
+        )  # fmt: skip
+        if alt is not None and alt.chi2 < screened[0]:
+            screened = (alt.chi2, grid)
+    if screened[1] is not None:  # the best screened recovery, fitted in full
+        alt = fit_adhesion_model(
+            trace, trial["per_axle"], trial["load_transfer"], step, pts,
+            recovery_grid[screened[1]], law_start, censored, clean,
         )  # fmt: skip
         if alt is not None and (best[0] is None or alt.chi2 < best[0].chi2):
-            best = (alt, grid)
+            best = (alt, screened[1])
     return best[0], step_m, best[1]
 
 
@@ -601,10 +635,19 @@ def _retest_balance(
                     worst = (dbic, j)
         if worst is None:
             start = 0
+            small = None
             for st, c in zip(steps, cols, strict=True):
                 st.parameters = _params_from(st, coef[start : start + len(c)])
                 start += len(c)
-            return res_full
+                why = negligible(st.category, st.parameters, trace) or implausible(
+                    st.category, st.parameters, trace
+                )
+                small = small or ((st, why) if why else None)
+            if small is None:
+                return res_full
+            result.added.remove(small[0])
+            result.dropped.append({**small[0].as_dict(), "reason": f"re-test: {small[1]}"})
+            continue
         gone = steps[worst[1]]
         result.added.remove(gone)
         result.dropped.append(
@@ -614,6 +657,16 @@ def _retest_balance(
                 f"{50 * MIN_REDUCTION:g} %)"
             )}
         )  # fmt: skip
+
+
+def _label(cand: Any) -> str:
+    """A qualified candidate's category (a pair: both, joined by '+')."""
+    if isinstance(cand, tuple):
+        return "+".join(c[0] for c in cand)
+    if isinstance(cand, str):
+        return {"per_axle": "adhesion_per_axle", "load_transfer": "load_transfer",
+                "position": "adhesion_position"}[cand]  # fmt: skip
+    return cand.category
 
 
 def _channel_of(cand: Any) -> str:
@@ -632,18 +685,19 @@ def discover(trace: Trace) -> Result:
     """Run the loop on one trace (see the module docstring)."""
     chans = channels(trace)
     before = {k: c.rmse for k, c in chans.items()}
-    result = Result(errors_before=before, errors_after=dict(before))
+    result = Result(errors_before=before, errors_after=dict(before), n_axles=trace.n_axles)
     health = channel_health(trace, chans)
     result.channel_health = health
     sampling = chans["train_speed_balance_kmh"].detail.get("sampling_rmse", 0.0)
-    speed_noise = noise_std(trace.v_train_kmh)
+    speed_noise = trace.ground_speed_noise_kmh
     floors = {
         "train_speed_balance_kmh": math.hypot(speed_noise, sampling),
         "coasting_creep_pct": 100.0 * speed_noise / max(float(np.median(trace.v_train_kmh)), 1.0),
     }
     residual = {k: chans[k].residual.copy() for k in floors}
     masks = {k: chans[k].mask for k in floors}
-    adhesion = {"per_axle": False, "load_transfer": False, "position": False}
+    adhesion = {"per_axle": False, "load_transfer": False, "position": False,
+                "cleaning": "cleaning_gain" in chans["adhesion_fit_kN"].detail}  # fmt: skip
     points = pooled_points(trace, MIN_SPEED_KMH)  # shared by every adhesion candidate
     bounds = censored_points(trace, MIN_SPEED_KMH)  # what rolling wheels prove (item 3)
     adh_rmse = chans["adhesion_fit_kN"].rmse
@@ -695,7 +749,9 @@ def discover(trace: Trace) -> Result:
                 row = {"name": cand.name, "category": cand.category, "channel": ch,
                        "before": rmse0, "after": rmse1, "delta_bic": dbic}  # fmt: skip
                 result.considered.append(row)
-                reason = implausible(cand.category, params, trace)
+                reason = implausible(cand.category, params, trace) or negligible(
+                    cand.category, params, trace
+                )
                 if reason:
                     row["rejected"] = reason
                     continue
@@ -731,9 +787,11 @@ def discover(trace: Trace) -> Result:
                                "before": rmse0, "after": rmse1, "delta_bic": dbic}  # fmt: skip
                         result.considered.append(row)
                         params = (terms[a][1](coef[0]), terms[b][1](coef[1]))
-                        reason = implausible(a, params[0], trace) or implausible(
-                            b, params[1], trace
-                        )
+                        reason = next(
+                            (why for c, q in ((a, params[0]), (b, params[1]))
+                             if (why := implausible(c, q, trace) or negligible(c, q, trace))),
+                            None,
+                        )  # fmt: skip
                         if reason:
                             row["rejected"] = reason
                             continue
@@ -795,6 +853,10 @@ def discover(trace: Trace) -> Result:
         best_after = min(q[5] for q in same)
         best = min((q for q in same if q[5] <= best_after + margin), key=lambda q: (q[7], q[5]))
         gain, cand, params, new, rmse0, rmse1, dbic, _ = best
+        # candidates the data cannot tell from the chosen one (within the tie margin): named
+        alternatives = sorted({_label(q[1]) for q in same if q is not best
+                               and q[5] <= rmse1 + margin} - {_label(cand)})  # fmt: skip
+        n_before = len(result.added)
         if isinstance(cand, tuple):  # two force effects fitted together on the balance
             ch = "train_speed_balance_kmh"
             residual[ch] = new
@@ -805,6 +867,8 @@ def discover(trace: Trace) -> Result:
                     Step(PAIR_NAMES[category], category, ch, p_fit, before, after, dbic)
                 )
                 before = after
+            for st in result.added[n_before:]:
+                st.alternatives = alternatives
             result.errors_after[ch] = rmse1
             continue
         if isinstance(cand, str):  # adhesion effect
@@ -841,6 +905,8 @@ def discover(trace: Trace) -> Result:
                 m = masks[ch]
                 result.errors_after[ch] = float(np.sqrt(np.mean(residual[ch][m] ** 2)))
         result.added.append(step)
+        for st in result.added[n_before:]:
+            st.alternatives = alternatives
     bal = "train_speed_balance_kmh"
     if any(st.channel == bal for st in result.added):
         residual[bal] = _retest_balance(trace, result, chans[bal].residual, masks[bal])

@@ -28,6 +28,7 @@ from matplotlib.figure import Figure
 from wsp_env.calibration.adhesion_estimate import (
     RECOVERY_TAU_S,
     RECOVERY_ZETA,
+    cleaning_factor,
     eq9,
     estimate_adhesion,
     fit_polach,
@@ -54,6 +55,11 @@ def scenario_options(result: Result) -> dict[str, Any]:
             factors = [1.0] + [float(p[f"axle_{i}_factor"]) for i in range(2, n + 2)]
             top = max(factors)
             opts["axle_mu_factor"] = [f / top for f in factors]
+    gain = result.adhesion_law.get("cleaning_gain")
+    if gain is not None and "axle_mu_factor" not in opts and result.n_axles > 1:
+        # the base law's cleaning along the train, as the env's per-axle factors
+        factors = list(cleaning_factor(np.arange(result.n_axles), result.n_axles)([gain]))
+        opts["axle_mu_factor"] = [float(f / max(factors)) for f in factors]
     return opts
 
 
@@ -62,7 +68,8 @@ def export_config(path: str | Path, trace: Trace, result: Result) -> tuple[Path,
 
     The rail is the calibrated adhesion law (``Result.adhesion_law``: the pooled Eq. 9 fit, with
     the last adhesion effect's joint refit) as a ``polach_simple`` rail, its level that of the
-    grippiest axle when per-axle factors are exported (they are normalised to it), and seed
+    grippiest axle when per-axle factors are exported (they are normalised to it; the base
+    law's cleaning along the train is exported as such factors too), and seed
     002's recovery on the sliding-power basis when the base law has it.
     """
     target = Path(path)
@@ -72,9 +79,7 @@ def export_config(path: str | Path, trace: Trace, result: Result) -> tuple[Path,
     opts = scenario_options(result)
     mu0 = float(law["mu0"])
     if "axle_mu_factor" in opts:  # factors normalised to the grippiest axle
-        step = next(s for s in result.added if s.category == "adhesion_per_axle")
-        factors = [1.0] + [v for k, v in step.parameters.items() if k.endswith("_factor")]
-        mu0 = float(mu0 * max(factors))
+        mu0 = float(mu0 / opts["axle_mu_factor"][0])  # axle 1 carries the law's own level
     rail: dict[str, Any] = {
         "law": "polach_simple",
         "law_params": {"K": float(law["K"]), "K_rozv_per_kmh": float(law["K_rozv"])},

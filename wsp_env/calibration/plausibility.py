@@ -31,8 +31,16 @@ RADIUS_ERROR_MAX = 0.06  # wear from 920 to ~860 mm diameter; beyond, the wheel 
 PAD_SCALE_RANGE = (0.5, 1.6)  # organic / sintered pads: mu 0.25-0.45 against a nominal ~0.35
 PRESSURE_LAG_MAX_S = 1.0  # pipe and cylinder filling behind the sensor: tenths of a second
 UNMEASURED_FORCE_MAX_G = 0.15  # a magnetic-track brake: ~0.1 g of the vehicle's weight
+UNMEASURED_PUSH_MAX_G = 0.02  # a propelling "brake" force: residual traction at most
 RESISTANCE_MAX_G = 0.03  # a train's running resistance at 200 km/h: ~1-2 % of its weight
 PITCH_HEIGHT_RATIO_MAX = 1.0  # bogie pitch k = (bogie's share of the mass) h / b: h < b
+
+# below these an effect is inside what a logger and its nominal data resolve: not reported
+SPEED_SCALE_MIN = 0.003  # a speed sensor's calibration tolerance (~0.3 %)
+# a force effect smaller than a gradient of this (RMS over the stop) is not reported: "level"
+# track varies by a permille along a stop, and so does the nominal resistance's accuracy
+GRADIENT_MIN_PERMILLE = 1.0
+LAG_MIN_S = 0.15  # a 10 Hz averaging log of a 5 Hz GPS fix lags by ~0.15 s by itself
 
 COASTING_CREEP_MAX_PCT = 8.0  # a rolling wheel reads at most radius + sensor errors off
 
@@ -75,10 +83,17 @@ def implausible(category: str, params: dict[str, float], trace: Trace) -> str | 
                 f"outside the {lo:g}-{hi:g} that pad materials span"
             )
     if "force_at_full_demand_N" in params:
-        if abs(params["force_at_full_demand_N"]) > UNMEASURED_FORCE_MAX_G * weight:
+        force = params["force_at_full_demand_N"]
+        if force > UNMEASURED_FORCE_MAX_G * weight:
             return (
-                f"unmeasured force {params['force_at_full_demand_N'] / 1e3:.1f} kN: beyond "
+                f"unmeasured force {force / 1e3:.1f} kN: beyond "
                 f"{UNMEASURED_FORCE_MAX_G:g} g of the vehicle's weight (a track brake's)"
+            )
+        if force < -UNMEASURED_PUSH_MAX_G * weight:
+            return (
+                f"unmeasured force {force / 1e3:.1f} kN propelling the train while it brakes: "
+                f"beyond {UNMEASURED_PUSH_MAX_G:g} g (traction not cut off is a fault, not a "
+                "brake effect)"
             )
     if "lag_s" in params and not 0.0 < params["lag_s"] <= PRESSURE_LAG_MAX_S:
         return f"pressure lag {params['lag_s']:.2f} s outside (0, {PRESSURE_LAG_MAX_S:g}] s"
@@ -103,6 +118,59 @@ def implausible(category: str, params: dict[str, float], trace: Trace) -> str | 
                 f"bogie pitch {params['bogie_pitch_kN_per_mps2']:.1f} kN per m/s^2: the pivot "
                 "would stand higher than the wheelbase is long"
             )
+    return None
+
+
+def negligible(category: str, params: dict[str, float], trace: Trace) -> str | None:
+    """The reason a fitted effect is too small to act on, or ``None``: a ground-speed scale
+    inside a sensor's calibration tolerance, a lag inside the logging's timing resolution.
+    Such effects are statistically real on long clean records (the logger's own sampling,
+    averaging and fix timing produce them) and physically nothing. Every force effect is
+    judged by the force it adds (``implied_force_N``, RMS over the stop above 10 km/h) against
+    a permille of the vehicle's weight, the force of the smallest gradient reported — so a
+    two-parameter effect whose parameters cancel is as negligible as its force."""
+    weight = float(trace.vehicle["mass_kg"]) * G
+    force_min = GRADIENT_MIN_PERMILLE * 1e-3 * weight
+    force = implied_force_N(category, params, trace)
+    if force is not None:
+        moving = trace.v_train_kmh > 10.0
+        rms = float(np.sqrt(np.mean(force[moving] ** 2))) if moving.any() else 0.0
+        if rms < force_min:
+            return (
+                f"{category} changes the retarding force by {rms / 1e3:.2f} kN (RMS over the "
+                f"stop): below {force_min / 1e3:.2f} kN, the force of a "
+                f"{GRADIENT_MIN_PERMILLE:g} permille gradient"
+            )
+    if "speed_scale_error" in params and abs(params["speed_scale_error"]) < SPEED_SCALE_MIN:
+        return (
+            f"ground-speed scale {100 * params['speed_scale_error']:+.2f} %: inside a sensor's "
+            f"{100 * SPEED_SCALE_MIN:g} % calibration tolerance"
+        )
+    for key, what in (("speed_lag_s", "ground-speed lag"), ("lag_s", "pressure lag")):
+        if key in params and abs(params[key]) < LAG_MIN_S:
+            return f"{what} {params[key]:.3f} s: inside the logging's {LAG_MIN_S:g} s resolution"
+    return None
+
+
+def implied_force_N(category: str, params: dict[str, float], trace: Trace) -> np.ndarray | None:
+    """The extra retarding force (N, per sample) a force effect adds to the nominal model, or
+    ``None`` for an effect that is not a force (a lag, a sensor, a wheel, the adhesion)."""
+    weight = float(trace.vehicle["mass_kg"]) * G
+    v = trace.v_train_kmh / 3.6
+    if category == "gradient" and "gradient_permille" in params:
+        return np.full(v.shape, weight * params["gradient_permille"] * 1e-3)
+    if category == "running_resistance":
+        return params.get("delta_a_N", 0.0) + params.get("delta_c_N_per_mps2", 0.0) * v * v
+    if category == "pad_friction":
+        from wsp_env.calibration.residuals import brake_force_N
+
+        scale = params.get("scale", 1.0) + params.get("slope_per_mps", 0.0) * (v - 100.0 / 3.6)
+        return (scale - 1.0) * brake_force_N(trace).sum(axis=1)
+    if category == "unmeasured_brake_force" and "force_at_full_demand_N" in params:
+        brake = trace.vehicle.get("brake", {})
+        p_max = float(brake.get("p_max_bar", 0.0)) or float(trace.p_cyl_bar.max())
+        demand = trace.optional.get("p_demand_bar", trace.p_cyl_bar.max(axis=1)) / p_max
+        return params["force_at_full_demand_N"] * np.asarray(demand, dtype=float)
     return None
 
 
@@ -140,4 +208,4 @@ def channel_health(trace: Trace, chans: dict[str, Any]) -> dict[str, dict[str, A
     return out
 
 
-__all__ = ["channel_health", "implausible"]
+__all__ = ["channel_health", "implausible", "negligible"]

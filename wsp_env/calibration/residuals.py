@@ -143,6 +143,8 @@ def adhesion_fit(trace: Trace) -> Channel:
     mask[pts.sample, pts.axle] = True
     mu0, K, k_rozv = (float(x) for x in fit.params[:3])
     detail = {"mu0": mu0, "K": K, "K_rozv": k_rozv, "chi2": fit.chi2}
+    if base.cleaning:
+        detail["cleaning_gain"] = float(fit.params[-1])
     if base.recovery_kW is not None:
         detail.update(
             recovery_w_lim_kW=base.recovery_kW[0],

@@ -49,6 +49,18 @@ class Trace:
     optional: dict[str, np.ndarray] = field(default_factory=dict)  # v_ref_kmh, a_train_mps2, ...
     extra: dict[str, np.ndarray] = field(default_factory=dict)  # unknown columns, kept
     notes: list[str] = field(default_factory=list)
+    # the ground-speed sensor's noise (km/h) where the reader measured it on held updates;
+    # None: measure it on the samples (``ground_speed_noise_kmh``)
+    v_train_noise_kmh: float | None = None
+
+    @property
+    def ground_speed_noise_kmh(self) -> float:
+        """The ground speed's sample noise (km/h): on its updates where it was held (an
+        interpolated record has no sample noise left to see), else on the samples."""
+        if self.v_train_noise_kmh is not None:
+            return self.v_train_noise_kmh
+        d2 = np.diff(np.asarray(self.v_train_kmh, dtype=float), 2)
+        return float(np.median(np.abs(d2)) / 0.6745 / np.sqrt(6.0)) if d2.size else 0.0
 
     @property
     def n_axles(self) -> int:
@@ -286,12 +298,55 @@ def read_trace(csv_path: str | Path) -> Trace:
             else:
                 cols[name] = _fill_gaps(path, name, cols[name], t, notes)
     _check_units(path, meta, cols, n)
+    cols["v_train_kmh"], v_noise = _unhold(cols["v_train_kmh"], t, notes)
     v_axle = np.stack([cols[f"v_axle_{i}_kmh"] for i in range(1, n + 1)], axis=1)
     p_cyl = np.stack([cols[f"p_cyl_{i}_bar"] for i in range(1, n + 1)], axis=1)
     optional = {k: cols[k] for k in _OPTIONAL if k in cols}
     known = set(required) | set(optional)
     extra = {k: v for k, v in cols.items() if k not in known}
-    return Trace(path, meta, t, cols["v_train_kmh"], v_axle, p_cyl, optional, extra, notes)
+    return Trace(path, meta, t, cols["v_train_kmh"], v_axle, p_cyl, optional, extra, notes, v_noise)
+
+
+HELD_FRACTION = 0.3  # of the moving samples repeating the previous value exactly
+
+
+def _unhold(v: np.ndarray, t: np.ndarray, notes: list[str]) -> tuple[np.ndarray, float | None]:
+    """A ground speed held between updates (a GPS fix every 0.1-1 s, logged faster, or held
+    through a dropout) lags the true speed by up to an update interval and has no sample noise
+    to measure. Where more than ``HELD_FRACTION`` of the moving samples repeat the previous
+    value exactly, each held level (a run of equal samples) is one update: placed half a log
+    period before the first sample that left the previous level (a fix falls anywhere inside
+    the logging period before it shows; a logger that averages shows it first as a blend,
+    which is dropped), and the speed is interpolated linearly between updates (noted). Returns
+    the speed and the noise measured on the updates (None where nothing was held)."""
+    moving = v > 1.0
+    repeats = np.concatenate([[False], np.diff(v) == 0.0])
+    if moving.sum() < 10 or repeats[moving].mean() <= HELD_FRACTION:
+        return v, None
+    period = float(np.median(np.diff(t)))
+    change = np.flatnonzero(np.diff(v) != 0.0) + 1  # first sample of every run
+    starts = np.concatenate([[0], change])
+    ends = np.concatenate([change, [v.size]])  # exclusive
+    fix_t, fix_v = [], []
+    left = 0  # first sample after the previous held level
+    for a, b in zip(starts, ends, strict=True):
+        if b - a >= 2 or a == 0 or b == v.size:  # a held level (or the record's ends)
+            fix_t.append(t[left] - (0.5 * period if left > 0 else 0.0))
+            fix_v.append(v[a])
+            left = b
+    fix_t_arr = np.asarray(fix_t)
+    keep = np.concatenate([[True], np.diff(fix_t_arr) > 0.0])
+    fix_v_arr = np.asarray(fix_v)[keep]
+    out = np.interp(t, fix_t_arr[keep], fix_v_arr)
+    d2 = np.diff(fix_v_arr[fix_v_arr > 1.0], 2)  # white noise on a smooth speed: MAD of d2
+    noise = float(np.median(np.abs(d2)) / 0.6745 / np.sqrt(6.0)) if d2.size >= 5 else None
+    interval = float(np.median(np.diff(fix_t_arr))) if len(fix_t) > 1 else float("nan")
+    notes.append(
+        f"column 'v_train_kmh': held between updates (median interval {interval:.2f} s, "
+        f"{100 * repeats[moving].mean():.0f} % of moving samples repeated): interpolated "
+        "between the updates"
+    )
+    return out, noise
 
 
 def _check_units(path: Path, meta: dict, cols: dict[str, np.ndarray], n: int) -> None:

@@ -1,0 +1,289 @@
+"""Detection power of the calibration loop on traces it was not developed on (README
+"Calibration on independent traces").
+
+    .venv/bin/python scripts/calibration_power.py [--scenarios 20] [--clean 50] [--pairs 20]
+        [--seed 0] [--jobs 2] [--json runs/power.json] [--categories gradient,wheel_radius]
+
+Traces come from ``wsp_env/calibration/independent.py``, a simulator that shares no code with
+``wsp_env/physics`` (its own vehicle model, friction law, WSP and logger quirks). For every
+category of DESIGN §8 a grid of effect magnitudes x ``--scenarios`` random scenarios, plus
+``--clean`` traces without any effect and ``--pairs`` traces per pair of effects. Each trace is
+written, read back through the project's reader and run through ``discover`` exactly as
+``wsp-env calibrate`` does.
+
+Reported per category and magnitude: the detection rate (the category among the added
+effects), the median relative parameter error, the median channel cut, the rate of extra
+effects; per category the smallest magnitude detected in >= 90 % of scenarios; the
+false-positive rate on clean traces (any effect added); per pair the rate at which both were
+found. Targets (issue 11) are printed beside the measured figures.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+import tempfile
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+# magnitude grid per category (natural units of independent.random_effect) and the target
+# magnitude at which >= 90 % must be detected (issue 11)
+GRID: dict[str, tuple[list[float], float]] = {
+    "gradient": ([2.0, 4.0, 8.0], 4.0),  # permille
+    "wheel_radius": ([0.004, 0.008, 0.016], 0.008),  # fraction, one axle
+    "pad_friction": ([0.05, 0.10, 0.20], 0.10),  # fraction off nominal
+    "unmeasured_brake_force": ([1500.0, 3000.0, 6000.0], 3000.0),  # N
+    "running_resistance": ([1.5, 2.0, 3.0], 2.0),  # factor
+    "pressure_lag": ([0.1, 0.2, 0.4], 0.2),  # s
+    "sensor_scale": ([0.0075, 0.015, 0.03], 0.015),  # fraction
+    "sensor_lag": ([0.1, 0.2, 0.4], 0.2),  # s
+    "load_transfer": ([1.5, 2.0, 3.0], 2.0),  # factor
+    "adhesion_position": ([0.15, 0.30, 0.50], 0.30),  # fractional change of mu
+}
+PAIRS = [
+    (("pad_friction", 0.15), ("pressure_lag", 0.3)),
+    (("gradient", 6.0), ("wheel_radius", 0.012)),
+    (("unmeasured_brake_force", 4000.0), ("pressure_lag", 0.3)),
+    (("gradient", 6.0), ("sensor_scale", 0.02)),
+]
+# the loop's category for each generator category, and the parameter compared
+LOOP_CATEGORY = {"sensor_scale": "sensor", "sensor_lag": "sensor"}
+TARGETS = {"false_positive_max": 0.02, "detection_min": 0.90, "pairs_min": 0.80}
+
+
+def _true_and_found(effect: Any, step: dict[str, Any], trace_meta: dict) -> tuple[float, float]:
+    """(true value, found value) of the effect's main parameter, NaN where not comparable."""
+    cat, p, q = effect.category, effect.params, step["parameters"]
+    if cat == "gradient":
+        return p["gradient_permille"], q.get("gradient_permille", math.nan)
+    if cat == "wheel_radius":
+        return p["radius_error"], q.get(f"axle_{int(p['axle'])}_radius_error", math.nan)
+    if cat == "pad_friction":
+        return p["scale"], q.get("scale", math.nan)
+    if cat == "unmeasured_brake_force":
+        return p["force_N"], q.get("force_at_full_demand_N", math.nan)
+    if cat == "pressure_lag":
+        return p["lag_s"], q.get("lag_s", math.nan)
+    if cat == "sensor_scale":
+        return p["scale_error"], q.get("speed_scale_error", math.nan)
+    if cat == "sensor_lag":
+        return p["lag_s"], q.get("speed_lag_s", math.nan)
+    if cat == "running_resistance":
+        res = trace_meta["vehicle"].get("resistance") or {}
+        v = 0.5 * float(trace_meta["initial_speed_kmh"]) / 3.6  # the stop's mean speed
+        nominal = res.get("a_N", 0.0) + v * (res.get("b_N_per_mps", 0.0) + v * res.get(
+            "c_N_per_mps2", 0.0))  # fmt: skip
+        found = q.get("delta_a_N", math.nan) + q.get("delta_c_N_per_mps2", 0.0) * v * v
+        return (p["factor"] - 1.0) * nominal, found
+    if cat == "adhesion_position":
+        return p["factor"], q.get("factor_beyond_step", math.nan)
+    return math.nan, math.nan
+
+
+def _effect(ind: Any, category: str, magnitude: float, rng: np.random.Generator, sc: Any) -> Any:
+    """The generator's effect for a grid magnitude: pad friction and the rail's friction
+    change are fractions off 1 here (weaker or stronger, rail worse or better: sign drawn),
+    factors in the generator."""
+    if category in ("pad_friction", "adhesion_position"):
+        sign = 1.0 if rng.random() < 0.5 else -1.0
+        return ind.random_effect(category, 1.0 + sign * magnitude, rng, sc)
+    return ind.random_effect(category, magnitude, rng, sc)
+
+
+def _run_one(job: dict[str, Any]) -> dict[str, Any]:
+    """Generate one trace, write it, read it back and run the loop (in a worker process)."""
+    os.environ.setdefault("NUMBA_NUM_THREADS", "1")
+    from wsp_env.calibration import independent as ind
+    from wsp_env.calibration.discovery import discover
+    from wsp_env.calibration.traces import read_trace
+
+    rng = np.random.default_rng(job["seed"])
+    scenario = ind.random_scenario(rng, **job.get("overrides", {}))
+    effects = [_effect(ind, c, m, rng, scenario) for c, m in job["effects"]]
+    t0 = time.perf_counter()
+    columns, meta = ind.generate(scenario, effects, seed=job["seed"])
+    t_gen = time.perf_counter() - t0
+    with tempfile.TemporaryDirectory() as tmp:
+        csv_path, _ = ind.write_trace(Path(tmp) / "t", columns, meta)
+        t1 = time.perf_counter()
+        try:
+            result = discover(read_trace(csv_path))
+        except Exception as err:  # a crash is a finding, reported, not hidden
+            return {**job, "error": f"{type(err).__name__}: {err}", "gen_s": t_gen}
+        t_cal = time.perf_counter() - t1
+    added = [s.as_dict() for s in result.added]
+    rows = []
+    for eff in effects:
+        want = LOOP_CATEGORY.get(eff.category, eff.category)
+        hits = [s for s in added if s["category"] == want]
+        if eff.category.startswith("sensor_"):  # scale vs lag: the parameter tells them apart
+            key = "speed_scale_error" if eff.category == "sensor_scale" else "speed_lag_s"
+            hits = [s for s in hits if key in s["parameters"]]
+        row = {"category": eff.category, "found": bool(hits), "true": math.nan,
+               "value": math.nan, "cut": math.nan}  # fmt: skip
+        if hits:
+            true, value = _true_and_found(eff, hits[0], meta)
+            row.update(true=true, value=value, cut=1.0 - hits[0]["after"] / hits[0]["before"])
+        rows.append(row)
+    expected = {LOOP_CATEGORY.get(e.category, e.category) for e in effects}
+    extra = [s["category"] for s in added if s["category"] not in expected]
+    return {**job, "effects_found": rows, "added": [s["category"] for s in added],
+            "extra": extra, "gen_s": t_gen, "calibrate_s": t_cal,
+            "n_axles": scenario.n_axles, "speed_kmh": scenario.speed_kmh,
+            "lead_in_s": scenario.lead_in_s}  # fmt: skip
+
+
+def _jobs(args: argparse.Namespace) -> list[dict[str, Any]]:
+    cats = args.categories.split(",") if args.categories else list(GRID)
+    jobs = []
+    seed = args.seed * 1_000_000
+    for k in range(args.clean):
+        jobs.append({"kind": "clean", "effects": [], "seed": seed + k})
+    for ci, cat in enumerate(cats):
+        for mi, mag in enumerate(GRID[cat][0]):
+            for k in range(args.scenarios):
+                s = seed + 10_000 * (ci + 1) + 1000 * mi + k
+                jobs.append({"kind": "single", "category": cat, "magnitude": mag,
+                             "effects": [(cat, mag)], "seed": s})  # fmt: skip
+    for pi, pair in enumerate(PAIRS if args.pairs else []):
+        for k in range(args.pairs):
+            s = seed + 500_000 + 1000 * pi + k
+            jobs.append({"kind": "pair", "pair": pi, "effects": list(pair), "seed": s})
+    return jobs
+
+
+def summarise(results: list[dict[str, Any]]) -> dict[str, Any]:
+    """The power table (module docstring) from the per-trace results."""
+    ok = [r for r in results if "error" not in r]
+    clean = [r for r in ok if r["kind"] == "clean"]
+    out: dict[str, Any] = {
+        "traces": len(results),
+        "errors": [
+            {k: r.get(k) for k in ("kind", "effects", "seed", "error")}
+            for r in results
+            if "error" in r
+        ],
+        "clean": {
+            "n": len(clean),
+            "false_positive_rate": float(np.mean([bool(r["added"]) for r in clean]))
+            if clean
+            else math.nan,
+            "added": sorted({c for r in clean for c in r["added"]}),
+        },
+        "categories": {},
+        "pairs": [],
+        "calibrate_s_median": float(np.median([r["calibrate_s"] for r in ok])) if ok else 0.0,
+        "calibrate_s_max": float(np.max([r["calibrate_s"] for r in ok])) if ok else 0.0,
+        "generate_s_median": float(np.median([r["gen_s"] for r in ok])) if ok else 0.0,
+    }
+    singles = [r for r in ok if r["kind"] == "single"]
+    for cat in dict.fromkeys(r["category"] for r in singles):
+        rows = []
+        for mag in GRID[cat][0]:
+            rs = [r for r in singles if r["category"] == cat and r["magnitude"] == mag]
+            if not rs:
+                continue
+            eff = [r["effects_found"][0] for r in rs]
+            found = [e for e in eff if e["found"]]
+            rel = [
+                abs(e["value"] - e["true"]) / abs(e["true"])
+                for e in found
+                if math.isfinite(e["value"]) and math.isfinite(e["true"]) and e["true"] != 0
+            ]
+            rows.append({
+                "magnitude": mag,
+                "n": len(rs),
+                "detection_rate": len(found) / len(rs),
+                "param_rel_error_median": float(np.median(rel)) if rel else math.nan,
+                "cut_median": float(np.median([e["cut"] for e in found])) if found else math.nan,
+                "extra_effect_rate": float(np.mean([bool(r["extra"]) for r in rs])),
+                "extra": sorted({c for r in rs for c in r["extra"]}),
+            })  # fmt: skip
+        detected = [row["magnitude"] for row in rows if row["detection_rate"] >= 0.9]
+        target = GRID[cat][1]
+        at_target = [row for row in rows if row["magnitude"] == target]
+        out["categories"][cat] = {
+            "rows": rows,
+            "smallest_90pct": min(detected) if detected else None,
+            "target_magnitude": target,
+            "target_met": bool(at_target and at_target[0]["detection_rate"] >= 0.9),
+        }
+    pairs = [r for r in ok if r["kind"] == "pair"]
+    for pi in sorted({r["pair"] for r in pairs}):
+        rs = [r for r in pairs if r["pair"] == pi]
+        both = [all(e["found"] for e in r["effects_found"]) for r in rs]
+        out["pairs"].append({
+            "effects": [list(e) for e in PAIRS[pi]],
+            "n": len(rs),
+            "both_found_rate": float(np.mean(both)),
+            "first_only_rate": float(np.mean([r["effects_found"][0]["found"] and not
+                                              r["effects_found"][1]["found"] for r in rs])),
+        })  # fmt: skip
+    return out
+
+
+def print_table(summary: dict[str, Any]) -> None:
+    c = summary["clean"]
+    print(f"clean traces: {c['n']}, false positives {100 * c['false_positive_rate']:.1f} % "
+          f"(target <= {100 * TARGETS['false_positive_max']:g} %) {c['added']}")  # fmt: skip
+    print(f"{'category':24s} {'magnitude':>10s} {'n':>4s} {'detect':>7s} {'param err':>9s} "
+          f"{'cut':>6s} {'extra':>6s}")  # fmt: skip
+    for cat, info in summary["categories"].items():
+        for row in info["rows"]:
+            mark = " <- target" if row["magnitude"] == info["target_magnitude"] else ""
+            err = 100 * row["param_rel_error_median"]
+            print(f"{cat:24s} {row['magnitude']:10.4g} {row['n']:4d} "
+                  f"{100 * row['detection_rate']:6.0f}% {err:8.0f}% "
+                  f"{100 * row['cut_median']:5.0f}% {100 * row['extra_effect_rate']:5.0f}%{mark}"
+                  f"{' ' + ','.join(row['extra']) if row['extra'] else ''}")  # fmt: skip
+        print(f"{'':24s} smallest detected >= 90 %: {info['smallest_90pct']}")
+    for p in summary["pairs"]:
+        print(f"pair {p['effects']}: both found {100 * p['both_found_rate']:.0f} % "
+              f"(first only {100 * p['first_only_rate']:.0f} %), n {p['n']}")  # fmt: skip
+    print(f"calibrate per trace: median {summary['calibrate_s_median']:.2f} s, "
+          f"max {summary['calibrate_s_max']:.2f} s; generate median "
+          f"{summary['generate_s_median']:.2f} s; errors {len(summary['errors'])}")  # fmt: skip
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scenarios", type=int, default=20)
+    ap.add_argument("--clean", type=int, default=50)
+    ap.add_argument("--pairs", type=int, default=20)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--categories", default="", help="comma-separated subset of the grid")
+    ap.add_argument("--json", dest="json_path", default=None)
+    args = ap.parse_args(argv)
+    unknown = set(filter(None, args.categories.split(","))) - set(GRID)
+    if unknown:
+        print(f"--categories: unknown {sorted(unknown)}; known {sorted(GRID)}", file=sys.stderr)
+        return 2
+    jobs = _jobs(args)
+    t0 = time.perf_counter()
+    with ProcessPoolExecutor(max_workers=max(1, args.jobs)) as pool:
+        results = list(pool.map(_run_one, jobs, chunksize=4))
+    summary = summarise(results)
+    summary["wall_s"] = time.perf_counter() - t0
+    summary["command"] = " ".join(["scripts/calibration_power.py", *(argv or sys.argv[1:])])
+    print_table(summary)
+    print(f"wall time {summary['wall_s']:.0f} s for {len(jobs)} traces")
+    if args.json_path:
+        path = Path(args.json_path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(".tmp")
+        tmp.write_text(json.dumps({"summary": summary, "results": results}, indent=1,
+                                  default=float))  # fmt: skip
+        tmp.replace(path)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

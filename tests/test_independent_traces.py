@@ -1,0 +1,116 @@
+"""The calibration loop judged on traces it was not developed on (issue 11): the independent
+generator (``calibration/independent.py``: its own vehicle model, Burckhardt friction law,
+rail cleaning, WSP and logger quirks, sharing no code with ``wsp_env/physics``) and a fixed
+subset of ``scripts/calibration_power.py``'s grid, small enough for CI. The full study and its
+figures are in the README ("Calibration on independent traces")."""
+
+from __future__ import annotations
+
+import ast
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from wsp_env.calibration import independent as ind
+from wsp_env.calibration.discovery import discover
+from wsp_env.calibration.traces import read_trace
+
+MODULE = Path(ind.__file__)
+
+
+def test_generator_shares_no_code_with_the_project():
+    """It imports the standard library and numpy only: nothing of ``wsp_env``."""
+    tree = ast.parse(MODULE.read_text())
+    names = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            names |= {a.name.split(".")[0] for a in node.names}
+        elif isinstance(node, ast.ImportFrom):
+            names.add((node.module or "").split(".")[0])
+    assert names <= {"__future__", "dataclasses", "json", "math", "collections", "pathlib",
+                     "typing", "numpy"}, names  # fmt: skip
+
+
+def _trace(tmp_path, seed, effects=(), **overrides):
+    rng = np.random.default_rng(seed)
+    scenario = ind.random_scenario(rng, **overrides)
+    effs = [ind.random_effect(c, m, rng, scenario) for c, m in effects]
+    columns, meta = ind.generate(scenario, effs, seed=seed)
+    csv_path, _ = ind.write_trace(tmp_path / f"t{seed}", columns, meta)
+    return read_trace(csv_path), effs, columns
+
+
+def test_same_seed_same_trace_and_the_wheels_never_turn_backwards():
+    rng = np.random.default_rng(3)
+    sc = ind.random_scenario(rng, n_axles=8, speed_kmh=160.0)
+    a, _ = ind.generate(sc, [], seed=3)
+    b, _ = ind.generate(sc, [], seed=3)
+    assert a.keys() == b.keys()
+    assert all(np.array_equal(a[k], b[k], equal_nan=True) for k in a)
+    speeds = np.stack([a[f"v_axle_{i}_kmh"] for i in range(1, 9)], axis=1)
+    assert np.nanmin(speeds) >= 0.0 and np.nanmax(a["v_train_kmh"]) < 175.0
+    assert a["v_train_kmh"][-1] < 2.0  # the record runs to the stop
+
+
+def test_a_held_ground_speed_is_interpolated_between_updates(tmp_path):
+    trace, _, _ = _trace(tmp_path, 1, gps_rate_hz=1.0, log_period_s=0.1, log_mode="hold")
+    assert any("held between updates" in n for n in trace.notes)
+    moving = trace.v_train_kmh > 5.0
+    assert np.mean(np.diff(trace.v_train_kmh[moving]) == 0.0) < 0.05
+
+
+# the fixed subset: seeds and scenarios drawn once, the loop judged on what it reports
+CLEAN_SEEDS = tuple(range(8))
+
+
+@pytest.mark.parametrize("seed", CLEAN_SEEDS)
+def test_clean_traces_get_no_force_timing_or_sensor_effect(tmp_path, seed):
+    """No effect on the balance and coasting channels of a clean trace: the logger's own
+    timing (held GPS fixes, averaging) and the generator's model differences stay below the
+    negligible sizes (``plausibility.negligible``). The adhesion channel is not asserted here:
+    on the generator's Burckhardt curve and rail cleaning it still names a structural effect
+    on some clean traces (README, issue 11: open)."""
+    trace, _, _ = _trace(tmp_path, seed)
+    result = discover(trace)
+    found = [(s.category, s.parameters) for s in result.added if s.channel != "adhesion_fit_kN"]
+    assert found == []
+
+
+@pytest.mark.parametrize(
+    "seed,category,magnitude,key,rel",
+    [
+        (11, "gradient", 8.0, "gradient_permille", 0.25),
+        (12, "pad_friction", 0.8, "scale", 0.05),  # the generator takes the factor
+        (13, "unmeasured_brake_force", 6000.0, "force_at_full_demand_N", 0.3),
+        (14, "sensor_scale", 0.03, "speed_scale_error", 0.3),
+    ],
+)
+def test_an_undeclared_effect_is_found(tmp_path, seed, category, magnitude, key, rel):
+    trace, (effect,), _ = _trace(tmp_path, seed, [(category, magnitude)])
+    result = discover(trace)
+    want = "sensor" if category.startswith("sensor") else category
+    hits = [s for s in result.added if s.category == want and key in s.parameters]
+    assert hits, [(s.category, s.parameters) for s in result.added]
+    true = {
+        "gradient": lambda p: p["gradient_permille"],
+        "pad_friction": lambda p: p["scale"],
+        "unmeasured_brake_force": lambda p: p["force_N"],
+        "sensor_scale": lambda p: p["scale_error"],
+    }[category](effect.params)
+    assert hits[0].parameters[key] == pytest.approx(true, rel=rel)
+
+
+def test_a_worn_wheel_is_found_from_half_a_second_of_coasting(tmp_path):
+    """0.8 % on one axle, 0.5 s lead-in: judged on the axles' differences, which the
+    ground-speed sensor's noise and lag do not reach."""
+    trace, (effect,), _ = _trace(tmp_path, 21, [("wheel_radius", 0.008)], lead_in_s=0.5)
+    result = discover(trace)
+    hits = [s for s in result.added if s.category == "wheel_radius"]
+    assert hits
+    axle = int(effect.params["axle"])
+    found = hits[0].parameters[f"axle_{axle}_radius_error"]
+    assert found == pytest.approx(effect.params["radius_error"], abs=0.002)
+    others = [v for k, v in hits[0].parameters.items() if k != f"axle_{axle}_radius_error"]
+    assert all(math.isclose(v, 0.0, abs_tol=1e-12) for v in others)
