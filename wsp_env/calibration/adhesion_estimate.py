@@ -239,6 +239,7 @@ def estimate_adhesion(trace: Trace, min_speed_kmh: float = 20.0) -> list[Critica
 CENSOR_BIN_M = 25.0  # one bound per axle and this much rail: the binding (largest) one
 CENSOR_MIN_TORQUE = 0.3  # of the axle's largest torque: a real brake demand, not a release
 CENSOR_ROLL_KMH = 0.5  # rolling: |V - v| below this (or 4 sensor sigmas) here and either side
+CENSOR_CALM_S = 2.0  # and no slide of its own for this long (a recovering rail is not the law's)
 
 
 @dataclass
@@ -266,7 +267,7 @@ def censored_points(trace: Trace, min_speed_kmh: float = 20.0) -> CensoredPoints
     adhesion: ``F = (T - J a / r) / r`` (the wheelset equation of a wheel decelerating with the
     train), the brake torque at least ``CENSOR_MIN_TORQUE`` of the axle's largest, the wheel
     within ``max(CENSOR_ROLL_KMH, 4 sigma)`` of the train speed at the sample and both
-    neighbours, above ``min_speed_kmh``."""
+    neighbours and for ``CENSOR_CALM_S`` before, above ``min_speed_kmh``."""
     veh = trace.vehicle
     r = float(veh["wheel_radius_m"])
     inertia = float(veh.get("wheelset_inertia_kgm2", 0.0))
@@ -286,6 +287,11 @@ def censored_points(trace: Trace, min_speed_kmh: float = 20.0) -> CensoredPoints
         band = np.abs(slide) < max(CENSOR_ROLL_KMH, 4.0 * sigma_kmh)
         rolling = np.zeros_like(band)
         rolling[1:-1] = band[1:-1] & band[:-2] & band[2:]
+        # not within CENSOR_CALM_S after a slide of its own: the rail under a wheel that has
+        # just slid is recovering (seed 002 Eqs. 9-14), a level the degraded law need not reach
+        slid_at = np.where(~band, t, -np.inf)
+        last_slide = np.maximum.accumulate(slid_at)
+        rolling &= t - last_slide > CENSOR_CALM_S
         top = float(torque.max()) if torque.size else 0.0
         keep = rolling & (torque > CENSOR_MIN_TORQUE * top) & (v_kmh > min_speed_kmh) & (top > 0)
         k = np.flatnonzero(keep)
