@@ -80,7 +80,8 @@ def test_rail_cleaning_is_reported_as_per_axle_adhesion(tmp_path, seed, speed):
             "adhesion_per_axle",
             ("axle_3_factor", 0.6, 0.1),
         ),
-        ({"resistance_scale": 3.0}, "running_resistance", ("delta_a_N", 1300.0, 0.25)),
+        # the nominal R(V) x 3: the one-parameter factor explains it
+        ({"resistance_scale": 3.0}, "running_resistance", ("factor", 3.0, 0.1)),
         (
             {"extra_brake_force_N": 5000.0},
             "unmeasured_brake_force",

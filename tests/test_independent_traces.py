@@ -85,6 +85,8 @@ def test_clean_traces_get_no_force_timing_or_sensor_effect(tmp_path, seed):
         (12, "pad_friction", 0.8, "scale", 0.05),  # the generator takes the factor
         (13, "unmeasured_brake_force", 6000.0, "force_at_full_demand_N", 0.3),
         (14, "sensor_scale", 0.03, "speed_scale_error", 0.3),
+        # the metadata's R(V) x 2 on a 102 km/h stop: one factor, not a gradient
+        (51014, "running_resistance", 2.0, "factor", 0.05),
     ],
 )
 def test_an_undeclared_effect_is_found(tmp_path, seed, category, magnitude, key, rel):
@@ -98,6 +100,7 @@ def test_an_undeclared_effect_is_found(tmp_path, seed, category, magnitude, key,
         "pad_friction": lambda p: p["scale"],
         "unmeasured_brake_force": lambda p: p["force_N"],
         "sensor_scale": lambda p: p["scale_error"],
+        "running_resistance": lambda p: p["factor"],
     }[category](effect.params)
     assert hits[0].parameters[key] == pytest.approx(true, rel=rel)
 

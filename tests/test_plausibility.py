@@ -32,6 +32,8 @@ def gradient_trace(tmp_path_factory):
         ("unmeasured_brake_force", {"force_at_full_demand_N": 2e5}, "unmeasured"),
         ("pressure_lag", {"lag_s": 3.0}, "pressure lag"),
         ("running_resistance", {"delta_a_N": -5e4, "delta_c_N_per_mps2": 0.0}, "resistance"),
+        ("running_resistance", {"factor": -1.0}, "propelling"),
+        ("running_resistance", {"factor": 400.0}, "weight"),
         ("load_transfer", {"bogie_pitch_kN_per_mps2": 400.0}, "bogie pitch"),
         ("sensor", {"speed_lag_s": float("nan")}, "not finite"),
     ],
@@ -51,6 +53,7 @@ def test_implausible_effects_are_named(gradient_trace, category, params, word):
         ("unmeasured_brake_force", {"force_at_full_demand_N": 5000.0}),
         ("pressure_lag", {"lag_s": 0.3}),
         ("load_transfer", {"bogie_pitch_kN_per_mps2": 10.0}),
+        ("running_resistance", {"factor": 3.0}),  # a storm headwind on a short train
     ],
 )
 def test_plausible_effects_pass(gradient_trace, category, params):
