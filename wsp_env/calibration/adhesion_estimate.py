@@ -319,11 +319,23 @@ def censored_points(trace: Trace, min_speed_kmh: float = 20.0) -> CensoredPoints
 PEAK_CREEP_GRID = np.logspace(-4.0, -0.3, 48)
 
 
+PEAK_SPEED_NODES = 40  # more speeds than this: the peak interpolated between as many nodes
+
+
 def eq9_peak(speed_kmh: np.ndarray, mu0: float, K: float, k_rozv: float) -> np.ndarray:
-    """The largest adhesion Eq. 9 offers at each train speed (over the creepage, ``DV = xi V``)."""
+    """The largest adhesion Eq. 9 offers at each train speed (over the creepage, ``DV = xi V``).
+
+    The peak is a smooth, monotone function of the speed: for many speeds (the censored bounds
+    of a long stop, evaluated at every step of a fit) it is computed at ``PEAK_SPEED_NODES``
+    evenly spaced speeds and interpolated linearly (on a 40-200 km/h span, nodes 4 km/h apart:
+    within 0.1 % of the direct maximum)."""
+    v = np.asarray(speed_kmh, dtype=float)
     xi = PEAK_CREEP_GRID[None, :]
-    v = np.asarray(speed_kmh, dtype=float)[:, None]
-    return eq9(xi, xi * v, mu0, K, k_rozv).max(axis=1)
+    if v.size <= PEAK_SPEED_NODES:
+        return eq9(xi, xi * v[:, None], mu0, K, k_rozv).max(axis=1)
+    nodes = np.linspace(float(v.min()), float(v.max()), PEAK_SPEED_NODES)
+    peak = eq9(xi, xi * nodes[:, None], mu0, K, k_rozv).max(axis=1)
+    return np.interp(v, nodes, peak)
 
 
 def pooled_points(trace: Trace, min_speed_kmh: float = 20.0) -> CriticalPoints:
