@@ -87,6 +87,9 @@ def test_clean_traces_get_no_force_timing_or_sensor_effect(tmp_path, seed):
         (14, "sensor_scale", 0.03, "speed_scale_error", 0.3),
         # the metadata's R(V) x 2 on a 102 km/h stop: one factor, not a gradient
         (51014, "running_resistance", 2.0, "factor", 0.05),
+        # 1.5 % at 80 km/h under a 0.29 km/h GPS: under twice the per-sample noise, 30 standard
+        # errors of the 7.9 s lead-in's mean (the coasting channel's own test)
+        (71017, "sensor_scale", 0.015, "speed_scale_error", 0.1),
     ],
 )
 def test_an_undeclared_effect_is_found(tmp_path, seed, category, magnitude, key, rel):

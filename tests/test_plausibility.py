@@ -11,7 +11,7 @@ import pytest
 from test_discovery import _trace
 
 from wsp_env.calibration.discovery import Result, Step, _retest_balance, discover
-from wsp_env.calibration.plausibility import implausible
+from wsp_env.calibration.plausibility import implausible, negligible_force
 from wsp_env.calibration.residuals import channels
 from wsp_env.calibration.traces import read_trace
 from wsp_env.cli import main
@@ -114,3 +114,14 @@ def test_calibrate_json_carries_channels_and_dropped(tmp_path):
     assert all(h["usable"] for h in data["channels"].values())
     assert data["dropped_effects"] == []
     assert data["added_effects"][0]["confidence"]["retest_delta_bic"] < -10.0
+
+
+def test_two_forces_that_cancel_are_negligible_together(gradient_trace):
+    """Weaker pads and an extra brake force of the same size explain nothing a force could:
+    the pair search judges their sum (each alone is large)."""
+    weight = float(gradient_trace.vehicle["mass_kg"]) * 9.80665
+    n = len(gradient_trace.time_s)
+    big = np.full(n, 0.01 * weight)  # 10 permille each
+    assert negligible_force(big, gradient_trace, "one") is None
+    reason = negligible_force(big - 0.999 * big, gradient_trace, "pads + extra force together")
+    assert reason is not None and "together" in reason

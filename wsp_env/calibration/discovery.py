@@ -61,7 +61,13 @@ from wsp_env.calibration.adhesion_estimate import (
     pooled_points,
     removed_fraction,
 )
-from wsp_env.calibration.plausibility import channel_health, implausible, negligible
+from wsp_env.calibration.plausibility import (
+    channel_health,
+    implausible,
+    implied_force_N,
+    negligible,
+    negligible_force,
+)
 from wsp_env.calibration.residuals import (
     MIN_SPEED_KMH,
     anchored,
@@ -343,14 +349,45 @@ def _fit_radius(trace, residual, mask):
 
 
 def _fit_sensor_coasting(trace, residual, mask):
-    offset = float(residual[mask].mean()) if mask.any() else 0.0
-    return {"speed_scale_error": offset / 100.0}, residual - offset
+    """One scale error of the ground speed: the same apparent creep on every coasting axle.
+
+    Judged on its own test, like the radius: at each sample the median creep of the coasting
+    axles (one worn wheel does not move it), and the mean of those medians against its
+    standard error — the robust scatter of the medians with one independent value per
+    ``SENSOR_CORRELATION_S`` of coasting, since the ground speed's error is common to every
+    axle and held between fixes. It qualifies at ``RADIUS_Z_MIN`` standard errors. (A test of
+    the channel's RMSE against the per-sample noise, as on the balance, needs an offset of
+    sqrt(3) sample sigmas: a 1.5 % scale under a 0.3 km/h GPS at 80 km/h was never tried.)"""
+    rows = mask.sum(axis=1) >= min(3, residual.shape[1])
+    if rows.sum() < RADIUS_MIN_SAMPLES:
+        return None
+    med = np.nanmedian(np.where(mask, residual, np.nan)[rows], axis=1)
+    offset = float(med.mean())
+    dt = float(np.median(np.diff(trace.time_s)))
+    n_eff = min(float(med.size), max(med.size * dt / SENSOR_CORRELATION_S, 1.0))
+    scatter = max(1.4826 * float(np.median(np.abs(med - np.median(med)))), RADIUS_MIN_SCATTER_PCT)
+    z = offset / (scatter / math.sqrt(n_eff))
+    if abs(z) < RADIUS_Z_MIN:
+        return None
+    new = residual - offset
+    rss0 = float(np.sum(residual[mask] ** 2))
+    rss1 = float(np.sum(new[mask] ** 2))
+    n = int(mask.sum())
+    stats = {
+        "delta_bic": _bic(rss1, n, 1) - _bic(rss0, n, 0),
+        "k": 1,
+        "gain": 1.0 - math.sqrt(rss1 / max(rss0, 1e-300)),
+        "z_max": abs(z),
+    }
+    # apparent creep 100 (V (1 + s) - V) / (V (1 + s)) = 100 s / (1 + s)
+    return {"speed_scale_error": offset / (100.0 - offset)}, new, stats
 
 
 # an axle's coasting offset must stand this many standard errors out of the axle sensors' noise
 RADIUS_Z_MIN = 6.0
 RADIUS_MIN_SAMPLES = 4
 RADIUS_MIN_SCATTER_PCT = 0.01  # the speed loggers' resolution, in creep %
+SENSOR_CORRELATION_S = 1.0  # a ground speed's error stays correlated for a GPS fix period
 
 
 # ---- adhesion fit --------------------------------------------------------------------------
@@ -766,7 +803,9 @@ def _discover(trace: Trace) -> Result:
                     continue
                 rss0 = float(np.sum(res[mask] ** 2))
                 rmse0 = math.sqrt(rss0 / n)
-                own_test = cand.category == "wheel_radius"  # judged on axle differences
+                # the coasting candidates carry their own test (an offset against its
+                # standard error, not the RMSE against the per-sample noise)
+                own_test = ch == "coasting_creep_pct"
                 if rmse0 < NOISE_FACTOR * floors[ch] and not own_test:
                     continue
                 fitted = cand.fit(trace, res, mask)
@@ -826,6 +865,15 @@ def _discover(trace: Trace) -> Result:
                              if (why := implausible(c, q, trace) or negligible(c, q, trace))),
                             None,
                         )  # fmt: skip
+                        # two forces that mostly cancel (weaker pads and an extra brake force)
+                        # explain nothing a force could: together they must be worth reporting
+                        forces = [
+                            implied_force_N(c, q, trace)
+                            for c, q in zip((a, b), params, strict=True)
+                        ]
+                        reason = reason or negligible_force(
+                            forces[0] + forces[1], trace, f"{a} + {b} together"
+                        )
                         if reason:
                             row["rejected"] = reason
                             continue

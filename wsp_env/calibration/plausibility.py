@@ -130,18 +130,9 @@ def negligible(category: str, params: dict[str, float], trace: Trace) -> str | N
     judged by the force it adds (``implied_force_N``, RMS over the stop above 10 km/h) against
     a permille of the vehicle's weight, the force of the smallest gradient reported — so a
     two-parameter effect whose parameters cancel is as negligible as its force."""
-    weight = float(trace.vehicle["mass_kg"]) * G
-    force_min = GRADIENT_MIN_PERMILLE * 1e-3 * weight
     force = implied_force_N(category, params, trace)
-    if force is not None:
-        moving = trace.v_train_kmh > 10.0
-        rms = float(np.sqrt(np.mean(force[moving] ** 2))) if moving.any() else 0.0
-        if rms < force_min:
-            return (
-                f"{category} changes the retarding force by {rms / 1e3:.2f} kN (RMS over the "
-                f"stop): below {force_min / 1e3:.2f} kN, the force of a "
-                f"{GRADIENT_MIN_PERMILLE:g} permille gradient"
-            )
+    if force is not None and (why := negligible_force(force, trace, category)):
+        return why
     if "speed_scale_error" in params and abs(params["speed_scale_error"]) < SPEED_SCALE_MIN:
         return (
             f"ground-speed scale {100 * params['speed_scale_error']:+.2f} %: inside a sensor's "
@@ -150,6 +141,21 @@ def negligible(category: str, params: dict[str, float], trace: Trace) -> str | N
     for key, what in (("speed_lag_s", "ground-speed lag"), ("lag_s", "pressure lag")):
         if key in params and abs(params[key]) < LAG_MIN_S:
             return f"{what} {params[key]:.3f} s: inside the logging's {LAG_MIN_S:g} s resolution"
+    return None
+
+
+def negligible_force(force_N: np.ndarray, trace: Trace, what: str) -> str | None:
+    """The reason an extra retarding force (N, per sample) is too small to report: its RMS
+    over the stop above 10 km/h under the force of a ``GRADIENT_MIN_PERMILLE`` gradient."""
+    force_min = GRADIENT_MIN_PERMILLE * 1e-3 * float(trace.vehicle["mass_kg"]) * G
+    moving = trace.v_train_kmh > 10.0
+    rms = float(np.sqrt(np.mean(force_N[moving] ** 2))) if moving.any() else 0.0
+    if rms < force_min:
+        return (
+            f"{what} changes the retarding force by {rms / 1e3:.2f} kN (RMS over the "
+            f"stop): below {force_min / 1e3:.2f} kN, the force of a "
+            f"{GRADIENT_MIN_PERMILLE:g} permille gradient"
+        )
     return None
 
 
@@ -217,4 +223,11 @@ def channel_health(trace: Trace, chans: dict[str, Any]) -> dict[str, dict[str, A
     return out
 
 
-__all__ = ["channel_health", "implausible", "negligible", "resistance_change_N"]
+__all__ = [
+    "channel_health",
+    "implausible",
+    "implied_force_N",
+    "negligible",
+    "negligible_force",
+    "resistance_change_N",
+]
