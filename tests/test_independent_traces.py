@@ -78,6 +78,16 @@ def test_clean_traces_get_no_force_timing_or_sensor_effect(tmp_path, seed):
     assert found == []
 
 
+@pytest.mark.parametrize("seed", [0, 18])
+def test_a_stop_that_never_slides_gets_no_friction_step(tmp_path, seed):
+    """Clean seeds 0 (wet rail) and 18 (dry, 12 axles) of the power study: the wheels never
+    reach the adhesion limit, so their critical points trace the brake's ramp up the creep
+    curve's initial slope, which a step on the rail (with an absurd base law) once fitted. A
+    friction step needs slides (``discovery.STEP_MIN_SLIDES``) and evidence on both sides."""
+    trace, _, _ = _trace(tmp_path, seed)
+    assert "adhesion_position" not in [s.category for s in discover(trace).added]
+
+
 @pytest.mark.parametrize(
     "seed,category,magnitude,key,rel",
     [

@@ -20,7 +20,9 @@ Channels and their candidates (categories of DESIGN §8):
   the ground speed, seen by every axle alike);
 * adhesion fit — ``adhesion_per_axle`` (a friction factor per axle), ``load_transfer`` (bogie
   pitch: leading axles +k a, trailing -k a), ``adhesion_position`` (a friction step on the
-  rail: a factor beyond a position found on a grid).
+  rail: a factor beyond a position found on a grid; only on a stop whose wheels slid, with
+  evidence of the adhesion limit on either side, and judged against the law with a trend in
+  train speed, which a step at one end of the stop would otherwise stand in for).
 
 Regressors in the balance channel enter linearly: an extra retarding force ``dF(t) = -c phi(t)``
 changes the predicted speed by ``+c/M int phi dt``, so the least-squares coefficient ``c`` of the
@@ -396,6 +398,26 @@ SENSOR_CORRELATION_S = 1.0  # a ground speed's error stays correlated for a GPS 
 # candidate step positions: 20 %, 25 %, ... 80 % of the way from the first critical point to the
 # last (a step needs room on either side to be told from a trend at the stop's end)
 STEP_FRACTIONS = np.linspace(0.2, 0.8, 13)
+# and evidence of the rail's available adhesion on either side: at least this share of it on each
+# side of a step, and at least STEP_MIN_SLIDES slides in all. Only a wheel at the adhesion limit
+# shows the rail's friction — a slide's turning point where the rail is worse, a censored bound
+# (a braked wheel rolling) where it is better. A slide is past the creep curve's peak (1-2 % on a
+# dry or wet rail, 3-7 % contaminated: SLIDE_MIN_CREEP) and SLIDE_MIN_KMH slower than the train
+# and than the fastest axle (below a WSP's first threshold, 2.5-4 km/h, beyond what the ground
+# speed's hold between fixes and the noise of the fastest of many axle sensors give a rolling
+# wheel); the other critical points are those of a wheel rolling under a rising brake
+# force, the creep curve's initial slope, so a stop that never slides (a wet rail) draws its brake
+# ramp there, not its rail.
+STEP_MIN_SIDE_SHARE = 0.1
+STEP_MIN_SLIDES = 8
+SLIDE_MIN_CREEP = 0.03
+SLIDE_MIN_KMH = 2.0
+# A rail's adhesion falls with train speed (Curtius-Kniffler: mu = 0.161 + 7.5 / (V + 44), ~20 %
+# from 20 to 100 km/h), which Eq. 9 (sliding speed only) lacks. Along a stop the speed falls as
+# the position grows, so that trend looks like a friction step to a model without it: a step is
+# judged against the law with a first-order train-speed trend ``1 + s (V_mid - V) / 100 km/h``
+# (``s`` within +-SPEED_TREND_MAX), the trend staying in the model once a step is added.
+SPEED_TREND_MAX = 1.0
 
 
 def _axle_offsets_m(trace: Trace) -> np.ndarray:
@@ -419,6 +441,7 @@ def fit_adhesion_model(
     censored: CensoredPoints | None = None,
     cleaning: bool = False,
     reweight: int = REWEIGHT,
+    speed_trend: bool = False,
 ) -> LawFit | None:
     """One Eq. 9 law for all axles' critical points (``pts``, default: the trace's; with the
     base law's recovery when ``removed`` is given, see ``adhesion_estimate.fit_law``), times the
@@ -427,7 +450,8 @@ def fit_adhesion_model(
     friction factor on the rail beyond ``step_m`` (position of the rail under the axle).
     ``censored``: the rolling wheels' lower bounds on the adhesion (``censored_points``), under
     the same factors. ``cleaning``: the base law's cleaning along the train
-    (``adhesion_estimate.cleaning_factor``, its gain the last parameter) stays in the model."""
+    (``adhesion_estimate.cleaning_factor``, its gain the last parameter) stays in the model.
+    ``speed_trend``: a first-order train-speed trend of the friction (``SPEED_TREND_MAX``)."""
     if pts is None:
         pts = pooled_points(trace, MIN_SPEED_KMH)
     if len(pts) < 10:
@@ -442,15 +466,19 @@ def fit_adhesion_model(
         start, low, high = [*start, 0.0], [*low, -50.0], [*high, 50.0]
     if step_m is not None:
         start, low, high = [*start, 1.0], [*low, 0.2], [*high, 5.0]
+    if speed_trend:
+        start, low, high = [*start, 0.0], [*low, -SPEED_TREND_MAX], [*high, SPEED_TREND_MAX]
     if cleaning:
         start, low, high = [*start, 0.1], [*low, 0.0], [*high, CLEANING_MAX]
     offsets = _axle_offsets_m(trace)
+    v_mid = float(np.median(trace.v_train_kmh[pts.sample]))
 
     def factors_for(points: Any) -> Callable[[np.ndarray], np.ndarray]:
         """The extensions' force factor at each of ``points`` (critical or censored)."""
         lead = np.where(points.axle % 2 == 0, 1.0, -1.0)
         rail_m = points.position_m - offsets[points.axle]
         beyond = rail_m > (step_m if step_m is not None else np.inf)
+        slower = (v_mid - trace.v_train_kmh[points.sample]) / 100.0
 
         def factor_of(p: np.ndarray) -> np.ndarray:
             j = 0
@@ -463,6 +491,9 @@ def fit_adhesion_model(
                 j += 1
             if step_m is not None:
                 out = np.where(beyond, out * p[j], out)
+                j += 1
+            if speed_trend:
+                out = out * np.maximum(1.0 + p[j] * slower, 0.2)
             if cleaning:
                 out = out * clean(p)
             return out
@@ -470,11 +501,19 @@ def fit_adhesion_model(
         clean = cleaning_factor(points.axle, trace.n_axles)
         return factor_of
 
-    extended = per_axle or load_transfer or step_m is not None or cleaning
+    extended = per_axle or load_transfer or step_m is not None or cleaning or speed_trend
     factors = factors_for(pts) if extended else None
     c_factors = factors_for(censored) if extended and censored is not None else None
     return fit_law(pts, factors, len(start), start, low, high, removed, law_start, censored,
                    c_factors, reweight)  # fmt: skip
+
+
+def _slides(trace: Trace, pts: CriticalPoints) -> np.ndarray:
+    """Which critical points are slides at the adhesion limit (``SLIDE_MIN_KMH``, ...)."""
+    depth = trace.v_axle_kmh.max(axis=1)[pts.sample] - trace.v_axle_kmh[pts.sample, pts.axle]
+    if trace.n_axles < 2:  # no other axle to compare with: the ground speed alone
+        depth = pts.sliding_kmh
+    return (np.minimum(pts.sliding_kmh, depth) >= SLIDE_MIN_KMH) & (pts.creepage >= SLIDE_MIN_CREEP)
 
 
 def fit_adhesion_step(
@@ -486,17 +525,27 @@ def fit_adhesion_step(
     law_start: np.ndarray | None = None,
     censored: CensoredPoints | None = None,
     cleaning: bool = False,
+    speed_trend: bool = False,
 ) -> tuple[LawFit | None, float]:
     """The adhesion model with a friction step on the rail, the step's position chosen on a
     grid of the positions with adhesion evidence — critical points and censored bounds, so a
-    rail that gets better and stops the slides is seen (best weighted fit)."""
+    rail that gets better and stops the slides is seen (best weighted fit) — where each side
+    holds ``STEP_MIN_SIDE_SHARE`` of that evidence. The grid is screened without the
+    ``speed_trend`` (quick fits); the chosen step is fitted with it."""
     x = pts.position_m
     if x.size < 10:
         return None, float("nan")
     if censored is not None and len(censored):
         x = np.concatenate([x, censored.position_m])
+    slides = pts.position_m[_slides(trace, pts)]
+    if slides.size < STEP_MIN_SLIDES:
+        return None, float("nan")
+    limit = slides if censored is None else np.concatenate([slides, censored.position_m])
     best: tuple[LawFit | None, float] = (None, float("nan"))
     for step_m in x.min() + STEP_FRACTIONS * (x.max() - x.min()):  # screened with one pass
+        share = float(np.mean(limit <= step_m))
+        if not STEP_MIN_SIDE_SHARE <= share <= 1.0 - STEP_MIN_SIDE_SHARE:
+            continue
         fit = fit_adhesion_model(
             trace, per_axle, load_transfer, float(step_m), pts, removed, law_start, censored,
             cleaning, reweight=0,
@@ -506,8 +555,9 @@ def fit_adhesion_step(
     if best[0] is None:
         return best
     final = fit_adhesion_model(
-        trace, per_axle, load_transfer, best[1], pts, removed, law_start, censored, cleaning
-    )
+        trace, per_axle, load_transfer, best[1], pts, removed, law_start, censored, cleaning,
+        speed_trend=speed_trend,
+    )  # fmt: skip
     return final, best[1]
 
 
@@ -530,17 +580,18 @@ def _fit_extension(
     parameter), the step's position held where the base recovery put it."""
     step_m = float("nan")
     clean = bool(trial.get("cleaning")) and not trial["per_axle"]  # per-axle factors replace it
+    trend = bool(trial.get("speed_trend"))
     if trial["position"]:
         fit, step_m = fit_adhesion_step(
             trace, trial["per_axle"], trial["load_transfer"], pts, removed, law_start, censored,
-            clean,
+            clean, trend,
         )  # fmt: skip
         if fit is None:
             return None, step_m, None
     else:
         fit = fit_adhesion_model(
             trace, trial["per_axle"], trial["load_transfer"], None, pts, removed, law_start,
-            censored, clean,
+            censored, clean, speed_trend=trend,
         )  # fmt: skip
     step = None if math.isnan(step_m) else step_m
     best: tuple[LawFit | None, tuple[float, float] | None] = (fit, None)
@@ -559,11 +610,42 @@ def _fit_extension(
     if screened[1] is not None:  # the best screened recovery, fitted in full
         alt = fit_adhesion_model(
             trace, trial["per_axle"], trial["load_transfer"], step, pts,
-            recovery_grid[screened[1]], law_start, censored, clean,
+            recovery_grid[screened[1]], law_start, censored, clean, speed_trend=trend,
         )  # fmt: skip
         if alt is not None and (best[0] is None or alt.chi2 < best[0].chi2):
             best = (alt, screened[1])
     return best[0], step_m, best[1]
+
+
+def _step_null(
+    trace: Trace,
+    adhesion: dict[str, bool],
+    pts: CriticalPoints,
+    removed: np.ndarray | None,
+    law_start: np.ndarray | None,
+    censored: CensoredPoints | None,
+    step_fit: LawFit,
+    step_removed: np.ndarray | None,
+    current: tuple[float, float],
+) -> tuple[float, float]:
+    """(chi2, RMSE) of the model a friction step is judged against: the current one with a
+    train-speed trend (``SPEED_TREND_MAX``), fitted from the current law and from the step
+    fit's (a step that only lets the law leave a poor local optimum is no step), with the
+    base's recovery and with the one the step re-chose; the current model if none does better."""
+    best = current
+    clean = bool(adhesion.get("cleaning")) and not adhesion["per_axle"]
+    starts = [(removed, law_start), (step_removed if step_removed is not None else removed,
+                                     step_fit.params[: step_fit.n_law])]  # fmt: skip
+    for rem, start in starts:
+        if start is not None and len(start) != (3 if rem is None else 4):
+            start = None
+        fit = fit_adhesion_model(
+            trace, adhesion["per_axle"], adhesion["load_transfer"], None, pts, rem, start,
+            censored, clean, speed_trend=True,
+        )  # fmt: skip
+        if fit is not None and fit.chi2 < best[0]:
+            best = (fit.chi2, fit.rmse)
+    return best
 
 
 CANDIDATES_BALANCE = [
@@ -768,7 +850,8 @@ def _discover(trace: Trace) -> Result:
     residual = {k: chans[k].residual.copy() for k in floors}
     masks = {k: chans[k].mask for k in floors}
     adhesion = {"per_axle": False, "load_transfer": False, "position": False,
-                "cleaning": "cleaning_gain" in chans["adhesion_fit_kN"].detail}  # fmt: skip
+                "cleaning": "cleaning_gain" in chans["adhesion_fit_kN"].detail,
+                "speed_trend": False}  # fmt: skip
     points = pooled_points(trace, MIN_SPEED_KMH)  # shared by every adhesion candidate
     bounds = censored_points(trace, MIN_SPEED_KMH)  # what rolling wheels prove (item 3)
     adh_rmse = chans["adhesion_fit_kN"].rmse
@@ -889,19 +972,32 @@ def _discover(trace: Trace) -> Result:
             if adhesion[key] or math.isnan(adh_rmse) or not health["adhesion_fit_kN"]["usable"]:
                 continue
             trial = dict(adhesion, **{key: True})
+            if key == "position":  # a step is judged against a trend in train speed
+                trial["speed_trend"] = True
             fit, step_m, trial_recovery = _fit_extension(
                 trace, trial, points, removed, law_start, recovery_grid, bounds
             )
             if fit is None or fit.at_bound:  # not identified (a parameter ran to its bound)
                 continue
             rmse1, x, n = fit.rmse, fit.params, fit.residual_kN.size
+            null_chi2, null_rmse = adh_chi2, adh_rmse
+            if trial["speed_trend"] and not adhesion["speed_trend"]:
+                null_chi2, null_rmse = _step_null(
+                    trace, adhesion, points, removed, law_start, bounds, fit,
+                    recovery_grid.get(trial_recovery) if trial_recovery else None,
+                    (adh_chi2, adh_rmse),
+                )  # fmt: skip
             # weighted residual sums: n ln(chi2 / n) is the BIC's likelihood term
-            dbic = _bic(fit.chi2, n, k) - _bic(adh_chi2, n, 0)
+            dbic = _bic(fit.chi2, n, k) - _bic(null_chi2, n, 0)
             gain = 1 - rmse1 / adh_rmse
             row = {"name": cat, "category": cat, "channel": "adhesion_fit_kN",
                    "before": adh_rmse, "after": rmse1, "delta_bic": dbic}  # fmt: skip
+            # a step must also beat the speed trend alone (BIC above, and MIN_REDUCTION of it)
+            beats_trend = 1 - rmse1 / null_rmse >= MIN_REDUCTION
+            if null_rmse != adh_rmse:
+                row["before_with_speed_trend"] = null_rmse
             result.considered.append(row)
-            if dbic < -MIN_DELTA_BIC and gain >= MIN_REDUCTION_ADHESION:
+            if dbic < -MIN_DELTA_BIC and gain >= MIN_REDUCTION_ADHESION and beats_trend:
                 params = {"mu0": x[0], "K": x[1], "K_rozv": x[2]}
                 if fit.n_law == 4:
                     params["recovery_gain"] = x[3]
@@ -916,6 +1012,9 @@ def _discover(trace: Trace) -> Result:
                     params["bogie_pitch_kN_per_mps2"] = pitch[0]
                 else:
                     params.update({"step_position_m": step_m, "factor_beyond_step": segs[0]})
+                if trial["speed_trend"]:
+                    params["speed_trend_per_100kmh"] = segs[-2 if trial["cleaning"] and not
+                                                            trial["per_axle"] else -1]  # fmt: skip
                 reason = implausible(cat, params, trace)
                 if reason:
                     row["rejected"] = reason
@@ -955,6 +1054,7 @@ def _discover(trace: Trace) -> Result:
             continue
         if isinstance(cand, str):  # adhesion effect
             adhesion[cand] = True
+            adhesion["speed_trend"] |= cand == "position"  # the step's null stays in the model
             # an adhesion entry carries its chi2 and its re-chosen recovery (if any) there
             adh_rmse, (adh_chi2, new_recovery) = rmse1, new
             if new_recovery is not None:
