@@ -130,3 +130,38 @@ def test_a_worn_wheel_is_found_from_half_a_second_of_coasting(tmp_path):
     assert found == pytest.approx(effect.params["radius_error"], abs=0.002)
     others = [v for k, v in hits[0].parameters.items() if k != f"axle_{axle}_radius_error"]
     assert all(math.isclose(v, 0.0, abs_tol=1e-12) for v in others)
+
+
+@pytest.mark.parametrize(
+    "seed,effects,want",
+    [
+        (31, [("pad_friction", 0.85), ("pressure_lag", 0.3)], {"pad_friction", "pressure_lag"}),
+        (33, [("pad_friction", 0.85), ("pressure_lag", 0.3)], {"pad_friction", "pressure_lag"}),
+        (
+            31,
+            [("unmeasured_brake_force", 4000.0), ("pressure_lag", 0.3)],
+            {"unmeasured_brake_force", "pressure_lag"},
+        ),
+    ],
+)
+def test_a_force_effect_and_a_pressure_lag_are_found_together(tmp_path, seed, effects, want):
+    """A lag looks much like a constant force during the stop: fitted on their own, a force
+    effect and a lag are taken for a gradient plus the force; the joint fit finds both."""
+    trace, _, _ = _trace(tmp_path, seed, effects)
+    result = discover(trace)
+    found = {s.category for s in result.added if s.channel == "train_speed_balance_kmh"}
+    assert found == want, [(s.category, s.parameters) for s in result.added]
+    lag = next(s for s in result.added if s.category == "pressure_lag")
+    assert lag.parameters["lag_s"] == pytest.approx(0.3, abs=0.1)
+
+
+@pytest.mark.parametrize("seed", [31, 32])
+def test_a_late_ground_speed_is_not_taken_for_a_late_brake(tmp_path, seed):
+    """0.4 s of ground-speed lag: the balance alone cannot tell it from a pressure lag; the
+    shifted prediction and the wheels (the ground speed reads above the rolling wheels) do."""
+    trace, _, _ = _trace(tmp_path, seed, [("sensor_lag", 0.4)])
+    result = discover(trace)
+    cats = [s.category for s in result.added if s.channel == "train_speed_balance_kmh"]
+    assert cats == ["sensor"], [(s.category, s.parameters) for s in result.added]
+    lag = next(s for s in result.added if s.category == "sensor").parameters["speed_lag_s"]
+    assert lag == pytest.approx(0.4, abs=0.15)

@@ -31,7 +31,18 @@ regressor ``1/M int phi dt`` gives the force as ``-c phi``.
 Pairs of one-parameter force effects (gradient, pad friction, unmeasured brake force) are also
 fitted jointly, so that two effects acting together are not absorbed by one two-parameter
 effect of another shape; a pair qualifies only if each term earns its place (the pair beats
-either term alone by ``MIN_REDUCTION``).
+either term alone by ``MIN_REDUCTION``). So is each of them with a pressure lag (the lag on its
+grid, the force's coefficient by least squares at each lag; the pad scale acts on the lagged
+force): during the stop a lag looks much like a constant extra force, so a force effect and a
+lag together are otherwise taken for a gradient plus whichever fits the rest.
+
+A pressure lag and a ground-speed lag are near twins on the balance (either makes the predicted
+speed fall ``tau a`` ahead of the logged one; only the resistance's share of ``a`` and the
+wheels' spin-up tell them apart there). The wheels tell them apart where they roll: a late
+ground speed reads ``tau a`` above the fastest rolling wheel, a late brake force leaves them in
+step (``_ground_speed_trail_s``). Where the two explain the balance alike, that verdict, if
+clear, breaks the tie (``_lag_verdict``); it is no veto beyond a tie, the fastest wheel's creep
+on a contaminated rail being too like a lag for that.
 
 Choice: the channel with the largest relative RMSE cut goes first; on it, candidates whose
 remaining error lies within half a noise floor of the best count as equally good, and the one
@@ -64,6 +75,7 @@ from wsp_env.calibration.adhesion_estimate import (
     removed_fraction,
 )
 from wsp_env.calibration.plausibility import (
+    SPEED_LAG_MAX_S,
     channel_health,
     implausible,
     implied_force_N,
@@ -81,6 +93,7 @@ from wsp_env.calibration.residuals import (
     masked_cumdiff,
     masked_cumtrapz,
     resistance_N,
+    train_speed_balance,
 )
 from wsp_env.calibration.traces import Trace
 
@@ -226,21 +239,76 @@ def _fit_unmeasured(trace, residual, mask):
     return {"force_at_full_demand_N": -coef[0]}, res
 
 
-def _fit_lag(trace, residual, mask):
-    """Grid over the lag; the brake force follows the logged pressure ``tau`` later."""
+# the pressure-lag grid (s): from below the reporting threshold to a few tenths beyond the
+# longest plausible pipe and cylinder filling behind the sensor
+LAG_GRID_S = np.arange(0.02, 0.81, 0.02)
+# the ground-speed lag grid (s): a held GPS fix, filtered, up to about a second and a half
+SPEED_LAG_GRID_S = np.arange(0.02, 1.51, 0.02)
+
+
+def _lagged_brake(trace: Trace, tau: float) -> np.ndarray:
+    """The brake force (N, summed over the axles) ``tau`` after the logged pressure."""
     brake = brake_force_N(trace).sum(axis=1)
-    base = _balance_regressor(trace, brake)
-    t = trace.time_s
+    if tau <= 0.0:
+        return brake
+    return np.interp(trace.time_s - tau, trace.time_s, brake, left=0.0)
+
+
+def _lag_signature(trace: Trace, tau: float) -> np.ndarray:
+    """How the balance residual changes when the brake force follows the logged pressure
+    ``tau`` later: the residual *less* this column is what is left (coefficient 1 for the lag
+    alone; with a pad-friction scale s in the model its coefficient is s)."""
+    return _balance_regressor(trace, _lagged_brake(trace, 0.0)) - _balance_regressor(
+        trace, _lagged_brake(trace, tau)
+    )
+
+
+def _fit_lag_alone(
+    trace: Trace, residual: np.ndarray, mask: np.ndarray
+) -> tuple[float, np.ndarray]:
+    """Grid over the lag; the brake force follows the logged pressure ``tau`` later."""
     best = (math.inf, 0.0, residual)
-    for tau in np.arange(0.02, 0.61, 0.02):
-        lagged = np.interp(t - tau, t, brake, left=0.0)
-        # replacing the force by its lagged version changes the prediction by (lagged - brake)
-        # a retarding force changed by (lagged - brake) raises the residual by its integral / M
-        res = residual + (_balance_regressor(trace, lagged) - base)  # no free gain: the lag alone
+    for tau in LAG_GRID_S:
+        # replacing the force by its lagged version changes the prediction by the integral of
+        # (lagged - brake) / M: no free gain, the lag alone
+        res = residual - _lag_signature(trace, float(tau))
         rss = float(np.sum(res[mask] ** 2))
         if rss < best[0]:
             best = (rss, float(tau), res)
-    return {"lag_s": best[1]}, best[2]
+    return best[1], best[2]
+
+
+def _fit_lag(trace, residual, mask):
+    """The pressure lag alone (``_fit_lag_alone``), as a candidate's parameters."""
+    tau, res = _fit_lag_alone(trace, residual, mask)
+    return {"lag_s": tau}, res
+
+
+def _fit_lag_with(
+    trace: Trace, residual: np.ndarray, mask: np.ndarray, partner: np.ndarray | None
+) -> tuple[float, float, np.ndarray]:
+    """A pressure lag fitted jointly with one force effect: on the lag grid, the partner's
+    coefficient by least squares with the lag's signature fixed. ``partner``: the force
+    effect's balance regressor (``_pair_terms``), ``None`` for the pad friction, whose scale
+    acts on the brake force as it reaches the rail, i.e. the lagged one: the model is then
+    ``s x brake(t - tau)``. Returns (tau, the partner's coefficient in the convention of
+    ``_pair_terms``, new residual)."""
+    best: tuple[float, float, float, np.ndarray] = (math.inf, 0.0, 0.0, residual)
+    nominal = _balance_regressor(trace, _lagged_brake(trace, 0.0))
+    for tau in LAG_GRID_S:
+        sig = _lag_signature(trace, float(tau))
+        if partner is None:
+            # residual = nominal - s lagged (+ noise): s = -coefficient, c = 1 - s
+            lagged = nominal - sig
+            coef, res = _linear(trace, residual - nominal, mask, [lagged])
+            c = 1.0 + float(coef[0])
+        else:
+            coef, res = _linear(trace, residual - sig, mask, [partner])
+            c = float(coef[0])
+        rss = float(np.sum(res[mask] ** 2))
+        if rss < best[0]:
+            best = (rss, float(tau), c, res)
+    return best[1], best[2], best[3]
 
 
 def _fit_sensor_balance(trace, residual, mask):
@@ -263,16 +331,71 @@ def _fit_sensor_balance(trace, residual, mask):
     return {"speed_scale_error": s}, res
 
 
+def _speed_lag_signature(predicted_drop: np.ndarray, t: np.ndarray, tau: float) -> np.ndarray:
+    """How the balance residual changes when the logged ground speed is the true one ``tau``
+    late: the logged drop is the true drop ``tau`` earlier, so the residual (predicted less
+    logged drop) grows by ``drop(t) - drop(t - tau)`` — the exact shift, not its first order
+    ``tau a`` (at a few tenths of a second a braking train's deceleration changes within the
+    lag). The true drop is taken as the model's ``predicted_drop``, not as the logged speed
+    shifted: that one carries the speed's noise, and a shifted copy of the noise would fit
+    the residual's own noise (a spurious edge over every other candidate)."""
+    return predicted_drop - np.interp(t - tau, t, predicted_drop, left=predicted_drop[0])
+
+
 def _fit_sensor_lag(trace, residual, mask):
-    """Ground speed logged ``tau`` late: the logged speed trails the true one by ``tau a``."""
-    measured_drop = -masked_cumdiff(trace.v_train_kmh, balance_intervals(trace))
-    predicted_drop = residual + measured_drop  # km/h (residual = predicted - measured drop)
-    decel_kmh_s = np.gradient(predicted_drop, trace.time_s)
-    # measured drop(t) = true drop(t - tau) ~ true drop(t) - tau a(t): residual ~ tau a(t)
-    coef, res = _linear(trace, residual, mask, [decel_kmh_s])
-    if coef[0] <= 0.0:  # a lag cannot lead
+    """Ground speed logged ``tau`` late: a grid over the lag (``_speed_lag_signature``) on the
+    drop the current model predicts (the residual plus the logged drop)."""
+    t = trace.time_s
+    predicted = residual - masked_cumdiff(trace.v_train_kmh, balance_intervals(trace))
+    best = (float(np.sum(residual[mask] ** 2)), 0.0, residual)
+    for tau in SPEED_LAG_GRID_S:
+        res = residual - anchored(_speed_lag_signature(predicted, t, float(tau)), t, mask)
+        rss = float(np.sum(res[mask] ** 2))
+        if rss < best[0]:
+            best = (rss, float(tau), res)
+    if best[1] <= 0.0:  # a lag cannot lead
         return None
-    return {"speed_lag_s": float(coef[0])}, res
+    return {"speed_lag_s": best[1]}, best[2]
+
+
+# the wheels' check on a lag: samples where every axle runs within this fraction of the fastest
+# (no axle sliding, every creep small), and the fewest such samples it needs
+ROLLING_SPREAD = 0.03
+ROLLING_MIN_SAMPLES = 30
+# a ground speed leading the wheels by more than this is no timing: the creep model misfits
+TRAIL_PLAUSIBLE_S = 0.5
+
+
+def _ground_speed_trail_s(trace: Trace) -> tuple[float, float] | None:
+    """How far the logged ground speed trails the wheel speeds (s), with its standard error.
+
+    The balance channel cannot tell a ground-speed lag from a pressure lag: either one makes
+    the predicted speed fall ``tau a`` ahead of the logged one. The wheel speeds can: they
+    are on time with the train (up to their creep), so a ground speed logged late reads
+    ``tau a`` above the fastest wheel while the train decelerates at ``a``, and a brake force
+    that follows the pressure late leaves wheels and ground speed in step. On the samples
+    where every axle rolls within ``ROLLING_SPREAD`` of the fastest (no slide), the gap
+    ``V - max v_i`` is fitted as ``c0 + trail a + k a V``: ``c0`` the sensors' offsets, the
+    last term the fastest wheel's creep (its slip speed grows with the force and the speed),
+    ``a`` the deceleration the logged pressures give. The error is inflated for the
+    residuals' correlation (a GPS speed interpolated between fixes). ``None``: too few
+    rolling samples or no deceleration to speak of."""
+    wheel = trace.v_axle_kmh.max(axis=1)
+    rolling = balance_mask(trace) & (trace.v_axle_kmh.min(axis=1) > (1 - ROLLING_SPREAD) * wheel)
+    if rolling.sum() < ROLLING_MIN_SAMPLES:
+        return None
+    v = trace.v_train_kmh
+    force = brake_force_N(trace).sum(axis=1) + resistance_N(trace, v / 3.6)
+    decel = 3.6 * force / float(trace.vehicle["mass_kg"])  # km/h per s
+    X = np.stack([np.ones(rolling.sum()), decel[rolling], decel[rolling] * v[rolling] / 100], 1)
+    y = (v - wheel)[rolling]
+    coef, *_ = np.linalg.lstsq(X, y, rcond=None)
+    e = y - X @ coef
+    dof = max(len(y) - 3, 1)
+    cov = np.linalg.pinv(X.T @ X) * float(e @ e) / dof
+    rho = float(np.clip(np.corrcoef(e[1:], e[:-1])[0, 1], 0.0, 0.95)) if len(e) > 3 else 0.0
+    se = math.sqrt(max(float(cov[1, 1]), 0.0) * (1 + rho) / (1 - rho))
+    return float(coef[1]), se
 
 
 # one-parameter force effects that can also act together (a gradient *and* weaker pads)
@@ -296,6 +419,7 @@ PAIR_NAMES = {
     "gradient": "gradient",
     "pad_friction": "pad friction",
     "unmeasured_brake_force": "unmeasured brake force",
+    "pressure_lag": "pressure lag",
 }
 
 
@@ -712,8 +836,9 @@ def _step_columns(trace: Trace, step: Step) -> list[np.ndarray] | None:
         return [_balance_regressor(trace, lagged) - _balance_regressor(trace, brake)]
     if "speed_scale_error" in step.parameters:
         return [drop]
-    if "speed_lag_s" in step.parameters:
-        return [np.gradient(drop, trace.time_s)]
+    if "speed_lag_s" in step.parameters:  # on the nominal model's predicted drop
+        predicted = train_speed_balance(trace).residual + drop
+        return [_speed_lag_signature(predicted, trace.time_s, step.parameters["speed_lag_s"])]
     return None
 
 
@@ -736,9 +861,7 @@ def _params_from(step: Step, coef: np.ndarray) -> dict[str, float]:
         return {"force_at_full_demand_N": -c[0]}
     if "speed_scale_error" in p:
         return {"speed_scale_error": -c[0]}
-    if "speed_lag_s" in p:
-        return {"speed_lag_s": c[0]}
-    return dict(p)  # the pressure lag keeps its grid value
+    return dict(p)  # a lag (pressure or ground speed) keeps its grid value
 
 
 def _retest_balance(
@@ -820,6 +943,30 @@ def _channel_of(cand: Any) -> str:
     return cand.channel
 
 
+def _lag_verdict(trace: Trace, tie: list[tuple]) -> list[tuple]:
+    """Candidates the balance cannot tell apart (``tie``), less the lag the wheels argue
+    against: where a ground-speed lag and a pressure lag (alone or in a pair) explain the
+    balance alike, the gap between the ground speed and the fastest rolling wheel
+    (``_ground_speed_trail_s``) is nearer ``tau`` (the ground speed trails) or nearer 0 (the
+    wheels and the ground speed in step: the brake force is late), by more than its standard
+    error. Where the wheels cannot tell (no rolling samples, a gap that is no timing, or one
+    within a standard error of the midpoint), the balance decides as for any tie: its two
+    signatures differ by the running resistance's (and any gradient's) share of the
+    deceleration, which only a late ground speed carries."""
+    speed = [q for q in tie if not isinstance(q[1], tuple | str) and q[1].fit is _fit_sensor_lag]
+    pressure = [q for q in tie if "pressure_lag" in _label(q[1]).split("+")]
+    if not (speed and pressure):
+        return tie
+    trail = _ground_speed_trail_s(trace)
+    if trail is None or not -TRAIL_PLAUSIBLE_S <= trail[0] <= SPEED_LAG_MAX_S:
+        return tie
+    mid = 0.5 * speed[0][2]["speed_lag_s"]
+    if abs(trail[0] - mid) <= trail[1]:
+        return tie
+    out = {id(q) for q in (pressure if trail[0] > mid else speed)}
+    return [q for q in tie if id(q) not in out]
+
+
 def _bic(rss: float, n: int, k: int) -> float:
     return n * math.log(max(rss, 1e-300) / n) + k * math.log(n)
 
@@ -873,6 +1020,7 @@ def _discover(trace: Trace) -> Result:
         if removed is None:
             removed = removed_fraction(trace, w_lim, w_span)[points.sample, points.axle]
     used: set[str] = set()
+    adhesion_rounds: dict[tuple, list[list[Any]]] = {}
     for _ in range(MAX_EFFECTS):
         qualified: list[tuple] = []
         for cands in (CANDIDATES_BALANCE, CANDIDATES_COASTING):
@@ -931,97 +1079,115 @@ def _discover(trace: Trace) -> Result:
                 for a in names:
                     _, r1 = _linear(trace, res, mask, [terms[a][0]])
                     single[a] = math.sqrt(float(np.sum(r1[mask] ** 2)) / n)
+                lag_alone = _fit_lag_alone(trace, res, mask)[1]
+                single["pressure_lag"] = math.sqrt(float(np.sum(lag_alone[mask] ** 2)) / n)
+                fits = []  # (a, b, parameters of a, parameters of b, new residual)
                 for i, a in enumerate(names):
                     for b in names[i + 1 :]:
                         coef, new = _linear(trace, res, mask, [terms[a][0], terms[b][0]])
-                        rmse1 = math.sqrt(float(np.sum(new[mask] ** 2)) / n)
-                        dbic = _bic(rmse1**2 * n, n, 2) - _bic(rss0, n, 0)
-                        gain = 1 - rmse1 / rmse0
-                        # each term must earn its place against the other alone
-                        earns = rmse1 <= (1 - MIN_REDUCTION) * min(single[a], single[b])
-                        row = {"name": f"{a} + {b}", "category": f"{a}+{b}", "channel": ch,
-                               "before": rmse0, "after": rmse1, "delta_bic": dbic}  # fmt: skip
-                        result.considered.append(row)
-                        params = (terms[a][1](coef[0]), terms[b][1](coef[1]))
-                        reason = next(
-                            (why for c, q in ((a, params[0]), (b, params[1]))
-                             if (why := implausible(c, q, trace) or negligible(c, q, trace))),
-                            None,
-                        )  # fmt: skip
-                        # two forces that mostly cancel (weaker pads and an extra brake force)
-                        # explain nothing a force could: together they must be worth reporting
-                        forces = [
-                            implied_force_N(c, q, trace)
-                            for c, q in zip((a, b), params, strict=True)
-                        ]
-                        reason = reason or negligible_force(
+                        fits.append((a, b, terms[a][1](coef[0]), terms[b][1](coef[1]), new))
+                # a force effect and a pressure lag together: the lag moves the brake force in
+                # time, which a constant or demand-shaped force (or a scaled brake force)
+                # absorbs only in part, so each alone leaves the other's shape behind
+                for a in names:
+                    reg = None if a == "pad_friction" else terms[a][0]
+                    tau, c, new = _fit_lag_with(trace, res, mask, reg)
+                    fits.append((a, "pressure_lag", terms[a][1](c), {"lag_s": tau}, new))
+                for a, b, pa, pb, new in fits:
+                    rmse1 = math.sqrt(float(np.sum(new[mask] ** 2)) / n)
+                    dbic = _bic(rmse1**2 * n, n, 2) - _bic(rss0, n, 0)
+                    gain = 1 - rmse1 / rmse0
+                    # each term must earn its place against the other alone
+                    earns = rmse1 <= (1 - MIN_REDUCTION) * min(single[a], single[b])
+                    row = {"name": f"{a} + {b}", "category": f"{a}+{b}", "channel": ch,
+                           "before": rmse0, "after": rmse1, "delta_bic": dbic}  # fmt: skip
+                    result.considered.append(row)
+                    reason = next(
+                        (why for c, q in ((a, pa), (b, pb))
+                         if (why := implausible(c, q, trace) or negligible(c, q, trace))),
+                        None,
+                    )  # fmt: skip
+                    # two forces that mostly cancel (weaker pads and an extra brake force)
+                    # explain nothing a force could: together they must be worth reporting
+                    forces = [implied_force_N(c, q, trace) for c, q in ((a, pa), (b, pb))]
+                    if not reason and forces[0] is not None and forces[1] is not None:
+                        reason = negligible_force(
                             forces[0] + forces[1], trace, f"{a} + {b} together"
                         )
-                        if reason:
-                            row["rejected"] = reason
-                            continue
-                        if dbic < -MIN_DELTA_BIC and gain >= MIN_REDUCTION and earns:
-                            pair = ((a, params[0], single[a]), (b, params[1], rmse1))
-                            qualified.append((gain, pair, None, new, rmse0, rmse1, dbic, 2))
+                    if reason:
+                        row["rejected"] = reason
+                        continue
+                    if dbic < -MIN_DELTA_BIC and gain >= MIN_REDUCTION and earns:
+                        pair = ((a, pa, single[a]), (b, pb, rmse1))
+                        qualified.append((gain, pair, None, new, rmse0, rmse1, dbic, 2))
         adhesion_candidates = (
             ("per_axle", "adhesion_per_axle", trace.n_axles - 1),
             ("load_transfer", "load_transfer", 1),
             ("position", "adhesion_position", 2),
         )
-        for key, cat, k in adhesion_candidates:
-            if adhesion[key] or math.isnan(adh_rmse) or not health["adhesion_fit_kN"]["usable"]:
-                continue
-            trial = dict(adhesion, **{key: True})
-            if key == "position":  # a step is judged against a trend in train speed
-                trial["speed_trend"] = True
-            fit, step_m, trial_recovery = _fit_extension(
-                trace, trial, points, removed, law_start, recovery_grid, bounds
-            )
-            if fit is None or fit.at_bound:  # not identified (a parameter ran to its bound)
-                continue
-            rmse1, x, n = fit.rmse, fit.params, fit.residual_kN.size
-            null_chi2, null_rmse = adh_chi2, adh_rmse
-            if trial["speed_trend"] and not adhesion["speed_trend"]:
-                null_chi2, null_rmse = _step_null(
-                    trace, adhesion, points, removed, law_start, bounds, fit,
-                    recovery_grid.get(trial_recovery) if trial_recovery else None,
-                    (adh_chi2, adh_rmse),
-                )  # fmt: skip
-            # weighted residual sums: n ln(chi2 / n) is the BIC's likelihood term
-            dbic = _bic(fit.chi2, n, k) - _bic(null_chi2, n, 0)
-            gain = 1 - rmse1 / adh_rmse
-            row = {"name": cat, "category": cat, "channel": "adhesion_fit_kN",
-                   "before": adh_rmse, "after": rmse1, "delta_bic": dbic}  # fmt: skip
-            # a step must also beat the speed trend alone (BIC above, and MIN_REDUCTION of it)
-            beats_trend = 1 - rmse1 / null_rmse >= MIN_REDUCTION
-            if null_rmse != adh_rmse:
-                row["before_with_speed_trend"] = null_rmse
-            result.considered.append(row)
-            if dbic < -MIN_DELTA_BIC and gain >= MIN_REDUCTION_ADHESION and beats_trend:
-                params = {"mu0": x[0], "K": x[1], "K_rozv": x[2]}
-                if fit.n_law == 4:
-                    params["recovery_gain"] = x[3]
-                extra = list(x[fit.n_law :])
-                axle_f = extra[: trace.n_axles - 1] if trial["per_axle"] else []
-                rest = extra[len(axle_f) :]
-                pitch = rest[:1] if trial["load_transfer"] else []
-                segs = rest[len(pitch) :]
-                if key == "per_axle":
-                    params.update({f"axle_{i + 2}_factor": v for i, v in enumerate(axle_f)})
-                elif key == "load_transfer":
-                    params["bogie_pitch_kN_per_mps2"] = pitch[0]
-                else:
-                    params.update({"step_position_m": step_m, "factor_beyond_step": segs[0]})
-                if trial["speed_trend"]:
-                    params["speed_trend_per_100kmh"] = segs[-2 if trial["cleaning"] and not
-                                                            trial["per_axle"] else -1]  # fmt: skip
-                reason = implausible(cat, params, trace)
-                if reason:
-                    row["rejected"] = reason
+        # the adhesion candidates depend on the adhesion model alone: a round that added a
+        # balance or coasting effect leaves them as they were (their fits are the loop's cost)
+        adh_key = (tuple(sorted(adhesion.items())), adh_chi2, id(removed))
+        if adh_key not in adhesion_rounds:
+            rows: list[list[Any]] = []  # [considered row, qualified entry or None]
+            for key, cat, k in adhesion_candidates:
+                if adhesion[key] or math.isnan(adh_rmse) or not health["adhesion_fit_kN"]["usable"]:
                     continue
-                qualified.append(
-                    (gain, key, params, (fit.chi2, trial_recovery), adh_rmse, rmse1, dbic, k)
+                trial = dict(adhesion, **{key: True})
+                if key == "position":  # a step is judged against a trend in train speed
+                    trial["speed_trend"] = True
+                fit, step_m, trial_recovery = _fit_extension(
+                    trace, trial, points, removed, law_start, recovery_grid, bounds
                 )
+                if fit is None or fit.at_bound:  # not identified (a parameter ran to its bound)
+                    continue
+                rmse1, x, n = fit.rmse, fit.params, fit.residual_kN.size
+                null_chi2, null_rmse = adh_chi2, adh_rmse
+                if trial["speed_trend"] and not adhesion["speed_trend"]:
+                    null_chi2, null_rmse = _step_null(
+                        trace, adhesion, points, removed, law_start, bounds, fit,
+                        recovery_grid.get(trial_recovery) if trial_recovery else None,
+                        (adh_chi2, adh_rmse),
+                    )  # fmt: skip
+                # weighted residual sums: n ln(chi2 / n) is the BIC's likelihood term
+                dbic = _bic(fit.chi2, n, k) - _bic(null_chi2, n, 0)
+                gain = 1 - rmse1 / adh_rmse
+                row = {"name": cat, "category": cat, "channel": "adhesion_fit_kN",
+                       "before": adh_rmse, "after": rmse1, "delta_bic": dbic}  # fmt: skip
+                # a step must also beat the speed trend alone (BIC above, and MIN_REDUCTION of it)
+                beats_trend = 1 - rmse1 / null_rmse >= MIN_REDUCTION
+                if null_rmse != adh_rmse:
+                    row["before_with_speed_trend"] = null_rmse
+                rows.append([row, None])
+                if dbic < -MIN_DELTA_BIC and gain >= MIN_REDUCTION_ADHESION and beats_trend:
+                    params = {"mu0": x[0], "K": x[1], "K_rozv": x[2]}
+                    if fit.n_law == 4:
+                        params["recovery_gain"] = x[3]
+                    extra = list(x[fit.n_law :])
+                    axle_f = extra[: trace.n_axles - 1] if trial["per_axle"] else []
+                    rest = extra[len(axle_f) :]
+                    pitch = rest[:1] if trial["load_transfer"] else []
+                    segs = rest[len(pitch) :]
+                    if key == "per_axle":
+                        params.update({f"axle_{i + 2}_factor": v for i, v in enumerate(axle_f)})
+                    elif key == "load_transfer":
+                        params["bogie_pitch_kN_per_mps2"] = pitch[0]
+                    else:
+                        params.update({"step_position_m": step_m, "factor_beyond_step": segs[0]})
+                    if trial["speed_trend"]:
+                        last_is_cleaning = trial["cleaning"] and not trial["per_axle"]
+                        params["speed_trend_per_100kmh"] = segs[-2 if last_is_cleaning else -1]
+                    reason = implausible(cat, params, trace)
+                    if reason:
+                        row["rejected"] = reason
+                        continue
+                    rows[-1][1] = (gain, key, params, (fit.chi2, trial_recovery), adh_rmse, rmse1,
+                                   dbic, k)  # fmt: skip
+            adhesion_rounds[adh_key] = rows
+        for row, entry in adhesion_rounds[adh_key]:
+            result.considered.append(dict(row))
+            if entry is not None:
+                qualified.append(entry)
         if not qualified:
             break
         # the channel with the largest relative cut goes first; on it, candidates whose remaining
@@ -1032,7 +1198,8 @@ def _discover(trace: Trace) -> Result:
         same = [q for q in qualified if _channel_of(q[1]) == channel]
         margin = 0.5 * floors.get(channel, 0.2 * lead[4])
         best_after = min(q[5] for q in same)
-        best = min((q for q in same if q[5] <= best_after + margin), key=lambda q: (q[7], q[5]))
+        tie = _lag_verdict(trace, [q for q in same if q[5] <= best_after + margin])
+        best = min(tie, key=lambda q: (q[7], q[5]))
         gain, cand, params, new, rmse0, rmse1, dbic, _ = best
         # candidates the data cannot tell from the chosen one (within the tie margin): named
         alternatives = sorted({_label(q[1]) for q in same if q is not best
