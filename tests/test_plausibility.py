@@ -11,7 +11,7 @@ import pytest
 from test_discovery import _trace
 
 from wsp_env.calibration.discovery import Result, Step, _retest_balance, discover
-from wsp_env.calibration.plausibility import implausible, negligible_force
+from wsp_env.calibration.plausibility import implausible, negligible, negligible_force
 from wsp_env.calibration.residuals import channels
 from wsp_env.calibration.traces import read_trace
 from wsp_env.cli import main
@@ -125,3 +125,19 @@ def test_two_forces_that_cancel_are_negligible_together(gradient_trace):
     assert negligible_force(big, gradient_trace, "one") is None
     reason = negligible_force(big - 0.999 * big, gradient_trace, "pads + extra force together")
     assert reason is not None and "together" in reason
+
+
+@pytest.mark.parametrize(
+    "category,params,small",
+    [
+        ("pad_friction", {"scale": 0.99, "slope_per_mps": -0.0008}, True),  # 1-2 % over the stop
+        ("pad_friction", {"scale": 0.90}, False),
+        ("running_resistance", {"factor": 0.8}, True),  # inside a Davis formula's third
+        ("running_resistance", {"factor": 2.0}, False),
+    ],
+)
+def test_pads_and_resistance_inside_their_own_tolerance_are_negligible(
+    gradient_trace, category, params, small
+):
+    reason = negligible(category, params, gradient_trace)
+    assert (reason is not None) == small, reason

@@ -44,6 +44,12 @@ SPEED_SCALE_MIN = 0.003  # a speed sensor's calibration tolerance (~0.3 %)
 # a force effect smaller than a gradient of this (RMS over the stop) is not reported: "level"
 # track varies by a permille along a stop, and so does the nominal resistance's accuracy
 GRADIENT_MIN_PERMILLE = 1.0
+# a pad's friction varies by a few percent from stop to stop (temperature, moisture, bedding):
+# a pad effect that stays inside that over the whole stop is nothing to recalibrate
+PAD_SCALE_MIN = 0.03
+# a running-resistance formula is good to about a third (measured coast-downs scatter by that
+# with wind and rail condition): a change inside it is the formula's own uncertainty
+RESISTANCE_REL_MIN = 1.0 / 3.0
 LAG_MIN_S = 0.15  # a 10 Hz averaging log of a 5 Hz GPS fix lags by ~0.15 s by itself
 
 COASTING_CREEP_MAX_PCT = 8.0  # a rolling wheel reads at most radius + sensor errors off
@@ -133,6 +139,25 @@ def negligible(category: str, params: dict[str, float], trace: Trace) -> str | N
     force = implied_force_N(category, params, trace)
     if force is not None and (why := negligible_force(force, trace, category)):
         return why
+    moving = trace.v_train_kmh > 10.0
+    v = trace.v_train_kmh[moving] / 3.6 if moving.any() else np.zeros(1)
+    if category == "pad_friction":
+        scale = params.get("scale", 1.0) + params.get("slope_per_mps", 0.0) * (v - 100.0 / 3.6)
+        worst = float(np.max(np.abs(scale - 1.0)))
+        if worst < PAD_SCALE_MIN:
+            return (
+                f"pad friction within {100 * worst:.1f} % of nominal over the stop: inside the "
+                f"{100 * PAD_SCALE_MIN:g} % a pad's friction varies from stop to stop"
+            )
+    if category == "running_resistance":
+        nominal = resistance_N(trace, v)
+        if np.all(nominal > 0.0):
+            worst = float(np.max(np.abs(resistance_change_N(params, trace, v)) / nominal))
+            if worst < RESISTANCE_REL_MIN:
+                return (
+                    f"running resistance within {100 * worst:.0f} % of the metadata's over the "
+                    f"stop: inside the {100 * RESISTANCE_REL_MIN:.0f} % a Davis formula is good to"
+                )
     if "speed_scale_error" in params and abs(params["speed_scale_error"]) < SPEED_SCALE_MIN:
         return (
             f"ground-speed scale {100 * params['speed_scale_error']:+.2f} %: inside a sensor's "
