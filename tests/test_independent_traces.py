@@ -66,16 +66,15 @@ CLEAN_SEEDS = tuple(range(8))
 
 
 @pytest.mark.parametrize("seed", CLEAN_SEEDS)
-def test_clean_traces_get_no_force_timing_or_sensor_effect(tmp_path, seed):
-    """No effect on the balance and coasting channels of a clean trace: the logger's own
-    timing (held GPS fixes, averaging) and the generator's model differences stay below the
-    negligible sizes (``plausibility.negligible``). The adhesion channel is not asserted here:
-    on the generator's Burckhardt curve and rail cleaning it still names a structural effect
-    on some clean traces (README, issue 11: open)."""
+def test_clean_traces_get_no_effect(tmp_path, seed):
+    """Nothing added to a clean trace: the logger's own timing (held GPS fixes, averaging)
+    and the generator's model differences stay below the negligible sizes
+    (``plausibility.negligible``), and its Burckhardt curve, speed fall-off and rail cleaning
+    name no adhesion effect. (These seeds were looked at while the loop was developed; the
+    README gives the false-positive rate on sets that were not.)"""
     trace, _, _ = _trace(tmp_path, seed)
     result = discover(trace)
-    found = [(s.category, s.parameters) for s in result.added if s.channel != "adhesion_fit_kN"]
-    assert found == []
+    assert [(s.category, s.parameters) for s in result.added] == []
 
 
 @pytest.mark.parametrize("seed", [0, 18])
