@@ -33,6 +33,7 @@ def gradient_trace(tmp_path_factory):
         ("pressure_lag", {"lag_s": 3.0}, "pressure lag"),
         ("running_resistance", {"delta_a_N": -5e4, "delta_c_N_per_mps2": 0.0}, "resistance"),
         ("running_resistance", {"factor": -1.0}, "propelling"),
+        ("unmeasured_brake_force", {"force_at_full_demand_N": -700.0}, "propelling"),
         ("running_resistance", {"factor": 400.0}, "weight"),
         ("load_transfer", {"bogie_pitch_kN_per_mps2": 400.0}, "bogie pitch"),
         ("sensor", {"speed_lag_s": float("nan")}, "not finite"),

@@ -32,7 +32,6 @@ RADIUS_ERROR_MAX = 0.06  # wear from 920 to ~860 mm diameter; beyond, the wheel 
 PAD_SCALE_RANGE = (0.5, 1.6)  # organic / sintered pads: mu 0.25-0.45 against a nominal ~0.35
 PRESSURE_LAG_MAX_S = 1.0  # pipe and cylinder filling behind the sensor: tenths of a second
 UNMEASURED_FORCE_MAX_G = 0.15  # a magnetic-track brake: ~0.1 g of the vehicle's weight
-UNMEASURED_PUSH_MAX_G = 0.02  # a propelling "brake" force: residual traction at most
 # the whole running resistance (nominal + change): a long train at 200 km/h has ~1-2 % of its
 # weight, a single car (nose and tail drag on one body) ~2 %, and a storm headwind doubles the
 # aerodynamic part: 6 % is beyond any of them
@@ -99,11 +98,11 @@ def implausible(category: str, params: dict[str, float], trace: Trace) -> str | 
                 f"unmeasured force {force / 1e3:.1f} kN: beyond "
                 f"{UNMEASURED_FORCE_MAX_G:g} g of the vehicle's weight (a track brake's)"
             )
-        if force < -UNMEASURED_PUSH_MAX_G * weight:
+        if force < 0.0:
             return (
-                f"unmeasured force {force / 1e3:.1f} kN propelling the train while it brakes: "
-                f"beyond {UNMEASURED_PUSH_MAX_G:g} g (traction not cut off is a fault, not a "
-                "brake effect)"
+                f"unmeasured force {force / 1e3:.1f} kN propelling the train in step with the "
+                "brake demand: no brake does that (traction left on would not follow the "
+                "demand; brake force weaker than declared is pad_friction)"
             )
     if "lag_s" in params and not 0.0 < params["lag_s"] <= PRESSURE_LAG_MAX_S:
         return f"pressure lag {params['lag_s']:.2f} s outside (0, {PRESSURE_LAG_MAX_S:g}] s"
