@@ -129,7 +129,9 @@ def implausible(category: str, params: dict[str, float], trace: Trace) -> str | 
 
 def negligible(category: str, params: dict[str, float], trace: Trace) -> str | None:
     """The reason a fitted effect is too small to act on, or ``None``: a ground-speed scale
-    inside a sensor's calibration tolerance, a lag inside the logging's timing resolution.
+    inside a sensor's calibration tolerance, a lag inside the logging's timing resolution, pads
+    inside their stop-to-stop variation (``PAD_SCALE_MIN``), a running resistance inside its
+    formula's accuracy (``RESISTANCE_REL_MIN``).
     Such effects are statistically real on long clean records (the logger's own sampling,
     averaging and fix timing produce them) and physically nothing. Every force effect is
     judged by the force it adds (``implied_force_N``, RMS over the stop above 10 km/h) against
