@@ -93,7 +93,6 @@ from wsp_env.calibration.residuals import (
     masked_cumdiff,
     masked_cumtrapz,
     resistance_N,
-    train_speed_balance,
 )
 from wsp_env.calibration.traces import Trace
 
@@ -246,42 +245,34 @@ LAG_GRID_S = np.arange(0.02, 0.81, 0.02)
 SPEED_LAG_GRID_S = np.arange(0.02, 1.51, 0.02)
 
 
-def _lagged_brake(trace: Trace, tau: float) -> np.ndarray:
-    """The brake force (N, summed over the axles) ``tau`` after the logged pressure."""
+def _lag_signatures(
+    trace: Trace, taus: np.ndarray | list[float] = LAG_GRID_S
+) -> tuple[np.ndarray, list[np.ndarray]]:
+    """The un-lagged brake force's balance regressor and, for each ``tau``, how the balance
+    residual changes when the brake force follows the logged pressure ``tau`` later: the
+    residual *less* that column is what is left (coefficient 1 for the lag alone; with a
+    pad-friction scale s in the model its coefficient is s). The brake force and its regressor
+    are computed once for the whole grid."""
+    t = trace.time_s
     brake = brake_force_N(trace).sum(axis=1)
-    if tau <= 0.0:
-        return brake
-    return np.interp(trace.time_s - tau, trace.time_s, brake, left=0.0)
-
-
-def _lag_signature(trace: Trace, tau: float) -> np.ndarray:
-    """How the balance residual changes when the brake force follows the logged pressure
-    ``tau`` later: the residual *less* this column is what is left (coefficient 1 for the lag
-    alone; with a pad-friction scale s in the model its coefficient is s)."""
-    return _balance_regressor(trace, _lagged_brake(trace, 0.0)) - _balance_regressor(
-        trace, _lagged_brake(trace, tau)
-    )
-
-
-def _fit_lag_alone(
-    trace: Trace, residual: np.ndarray, mask: np.ndarray
-) -> tuple[float, np.ndarray]:
-    """Grid over the lag; the brake force follows the logged pressure ``tau`` later."""
-    best = (math.inf, 0.0, residual)
-    for tau in LAG_GRID_S:
-        # replacing the force by its lagged version changes the prediction by the integral of
-        # (lagged - brake) / M: no free gain, the lag alone
-        res = residual - _lag_signature(trace, float(tau))
-        rss = float(np.sum(res[mask] ** 2))
-        if rss < best[0]:
-            best = (rss, float(tau), res)
-    return best[1], best[2]
+    nominal = _balance_regressor(trace, brake)
+    sigs = [
+        nominal - _balance_regressor(trace, np.interp(t - tau, t, brake, left=0.0)) for tau in taus
+    ]
+    return nominal, sigs
 
 
 def _fit_lag(trace, residual, mask):
-    """The pressure lag alone (``_fit_lag_alone``), as a candidate's parameters."""
-    tau, res = _fit_lag_alone(trace, residual, mask)
-    return {"lag_s": tau}, res
+    """Grid over the lag; the brake force follows the logged pressure ``tau`` later (replacing
+    the force by its lagged version changes the prediction by the integral of
+    (lagged - brake) / M: no free gain, the lag alone)."""
+    best = (math.inf, 0.0, residual)
+    for tau, sig in zip(LAG_GRID_S, _lag_signatures(trace)[1], strict=True):
+        res = residual - sig
+        rss = float(np.sum(res[mask] ** 2))
+        if rss < best[0]:
+            best = (rss, float(tau), res)
+    return {"lag_s": best[1]}, best[2]
 
 
 def _fit_lag_with(
@@ -294,9 +285,8 @@ def _fit_lag_with(
     ``s x brake(t - tau)``. Returns (tau, the partner's coefficient in the convention of
     ``_pair_terms``, new residual)."""
     best: tuple[float, float, float, np.ndarray] = (math.inf, 0.0, 0.0, residual)
-    nominal = _balance_regressor(trace, _lagged_brake(trace, 0.0))
-    for tau in LAG_GRID_S:
-        sig = _lag_signature(trace, float(tau))
+    nominal, sigs = _lag_signatures(trace)
+    for tau, sig in zip(LAG_GRID_S, sigs, strict=True):
         if partner is None:
             # residual = nominal - s lagged (+ noise): s = -coefficient, c = 1 - s
             lagged = nominal - sig
@@ -464,14 +454,18 @@ def _fit_radius(trace, residual, mask):
     ok = np.isfinite(diff)
     rss0 = float(np.sum(diff[ok] ** 2))
     rss1 = float(np.sum((diff - offsets[None, :])[ok] ** 2))
-    n, k = int(ok.sum()), int(np.count_nonzero(offsets))
-    stats = {
+    stats = _own_test(rss0, rss1, int(ok.sum()), int(np.count_nonzero(offsets)), np.abs(z).max())
+    return params, new, stats
+
+
+def _own_test(rss0: float, rss1: float, n: int, k: int, z_max: float) -> dict[str, float]:
+    """The statistics a coasting candidate's own test reports (``discover`` reads them)."""
+    return {
         "delta_bic": _bic(rss1, n, k) - _bic(rss0, n, 0),
         "k": k,
         "gain": 1.0 - math.sqrt(rss1 / max(rss0, 1e-300)),
-        "z_max": float(np.max(np.abs(z))),
+        "z_max": float(z_max),
     }
-    return params, new, stats
 
 
 def _fit_sensor_coasting(trace, residual, mask):
@@ -497,14 +491,7 @@ def _fit_sensor_coasting(trace, residual, mask):
         return None
     new = residual - offset
     rss0 = float(np.sum(residual[mask] ** 2))
-    rss1 = float(np.sum(new[mask] ** 2))
-    n = int(mask.sum())
-    stats = {
-        "delta_bic": _bic(rss1, n, 1) - _bic(rss0, n, 0),
-        "k": 1,
-        "gain": 1.0 - math.sqrt(rss1 / max(rss0, 1e-300)),
-        "z_max": abs(z),
-    }
+    stats = _own_test(rss0, float(np.sum(new[mask] ** 2)), int(mask.sum()), 1, abs(z))
     # apparent creep 100 (V (1 + s) - V) / (V (1 + s)) = 100 s / (1 + s)
     return {"speed_scale_error": offset / (100.0 - offset)}, new, stats
 
@@ -808,8 +795,11 @@ CANDIDATES_COASTING = [
 # ---- re-test: every balance effect must still earn its place once all are in ---------------
 
 
-def _step_columns(trace: Trace, step: Step) -> list[np.ndarray] | None:
-    """The balance regressors of an added effect (``None``: chosen on another channel)."""
+def _step_columns(
+    trace: Trace, step: Step, nominal_residual: np.ndarray
+) -> list[np.ndarray] | None:
+    """The balance regressors of an added effect (``None``: chosen on another channel);
+    ``nominal_residual``: the balance channel's residual under the nominal model."""
     if step.channel != "train_speed_balance_kmh":
         return None
     mass = float(trace.vehicle["mass_kg"])
@@ -830,14 +820,12 @@ def _step_columns(trace: Trace, step: Step) -> list[np.ndarray] | None:
     if step.category == "unmeasured_brake_force":
         return [_balance_regressor(trace, _demand_fraction(trace))]
     if step.category == "pressure_lag":
-        tau = step.parameters["lag_s"]
-        lagged = np.interp(trace.time_s - tau, trace.time_s, brake, left=0.0)
-        # the lag's signature (its coefficient is -1 when the lag is all there is)
-        return [_balance_regressor(trace, lagged) - _balance_regressor(trace, brake)]
+        # the lag's signature, negated: its coefficient is -1 when the lag is all there is
+        return [-_lag_signatures(trace, [step.parameters["lag_s"]])[1][0]]
     if "speed_scale_error" in step.parameters:
         return [drop]
     if "speed_lag_s" in step.parameters:  # on the nominal model's predicted drop
-        predicted = train_speed_balance(trace).residual + drop
+        predicted = nominal_residual + drop
         return [_speed_lag_signature(predicted, trace.time_s, step.parameters["speed_lag_s"])]
     return None
 
@@ -880,10 +868,11 @@ def _retest_balance(
             fixed = fixed + st.parameters["speed_scale_error"] * anchored(drop, trace.time_s, mask)
     n = int(mask.sum())
     while True:
-        steps = [st for st in result.added if _step_columns(trace, st) is not None]
+        columns = [(st, _step_columns(trace, st, residual0)) for st in result.added]
+        steps = [st for st, c in columns if c is not None]
         if not steps:
             return fixed
-        cols = [_step_columns(trace, st) or [] for st in steps]
+        cols = [c for _, c in columns if c is not None]
         k_all = sum(len(c) for c in cols)
         coef, res_full = _linear(trace, fixed, mask, [x for c in cols for x in c])
         rss_full = float(np.sum(res_full[mask] ** 2))
@@ -1079,7 +1068,7 @@ def _discover(trace: Trace) -> Result:
                 for a in names:
                     _, r1 = _linear(trace, res, mask, [terms[a][0]])
                     single[a] = math.sqrt(float(np.sum(r1[mask] ** 2)) / n)
-                lag_alone = _fit_lag_alone(trace, res, mask)[1]
+                lag_alone = _fit_lag(trace, res, mask)[1]
                 single["pressure_lag"] = math.sqrt(float(np.sum(lag_alone[mask] ** 2)) / n)
                 fits = []  # (a, b, parameters of a, parameters of b, new residual)
                 for i, a in enumerate(names):
