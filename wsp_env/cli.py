@@ -288,7 +288,8 @@ def _add_calibrate(sub: argparse._SubParsersAction) -> None:
         help="explain a measured trace: residual channels, effect discovery, error before/after",
         description="Reads TRACE.csv (+ TRACE.meta.json next to it, wsp-trace/1), computes the "
         "train-speed balance, adhesion fit and coasting creep residuals, and adds the physical "
-        "effects (BIC-scored) that explain them. Not yet: report, export.",
+        "effects (BIC-scored) that explain them; --report writes a report with plots, --export "
+        "a rail table the environment loads. Format: docs/trace_format.md.",
     )
     p.add_argument("trace", help="the trace CSV (metadata found next to it)")
     p.add_argument("--json", dest="json_path", default=None, help="write the result here")
@@ -317,6 +318,7 @@ def cmd_calibrate(args: argparse.Namespace) -> dict[str, Any]:
         "dropped_effects": result.dropped,
         "channels": result.channel_health,
         "adhesion_law": result.adhesion_law,
+        "wheel_lag": result.wheel_lag,
         "candidates": result.considered,
         "notes": trace.notes,
         "outputs": [],
@@ -347,6 +349,8 @@ def _print_calibrate(result: dict[str, Any]) -> None:
     for name, h in result.get("channels", {}).items():
         if not h["usable"]:
             print(f"  channel {name} not used: {h['reason']}")
+        elif h.get("extensions"):
+            print(f"  channel {name}: {h['extensions']}")
     for u in result["unexplained"]:
         print(
             f"  unexplained: {u['channel']} still {u['rmse']:.3f} "

@@ -1,0 +1,129 @@
+"""The brake's lag behind the logged pressure, measured on the wheels.
+
+A brake force that follows the logged cylinder pressure ``tau`` late (a sensor upstream of
+the cylinder, a long pipe) and a ground speed logged ``tau`` late are twins on the
+train-speed balance: either makes the predicted speed fall ``tau a`` ahead of the logged one
+(``discovery``). The wheelset equation tells them apart, because the ground speed is not in
+it (seed 000 Eq. 3–6, ``adhesion_estimate``)::
+
+    F_i(t) r = J domega_i/dt + T_i(t - tau)      T_i = gain_i (p_i - p_th)^+
+
+While a wheel slides, its adhesion force ``F_i`` changes with the creep and the sliding speed
+— smoothly — while the torque jumps with every valve command (a vent drops the pressure within
+a few tenths of a second). At the wrong ``tau`` the estimate ``F_i`` carries the torque's jumps
+uncompensated (the wheel answers the torque ``tau`` after the log shows it), so ``tau`` is the
+lag that makes ``F_i`` smoothest: the sum of its squared sample-to-sample changes over the
+samples where the wheel slides is least.
+
+What makes this robust on logged data: a logger that averages, or stamps late, shifts the
+wheel speeds and the pressures alike, which leaves the relative timing this measures alone;
+the ground speed's hold between fixes, its lag and its scale do not enter (a slide is judged
+against the fastest axle, not the ground speed); a pad-friction scale multiplies the torque
+and leaves the smoothest ``tau`` where it is.
+
+Uncertainty: the slides fall into separate episodes (a contiguous run of sliding samples of
+one axle, with a few samples either side); the lag's standard error is the jackknife over
+episodes (each left out in turn, the lag re-found from the other episodes' sums).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from wsp_env.calibration.traces import Trace
+
+# the lag grid (s): from a lead (an estimate that reads early says the timing is off, not
+# that the brake is fast) to well beyond a brake pipe's plausible delay
+TAU_GRID_S = np.arange(-0.3, 1.001, 0.02)
+SLIDE_KMH = 2.0  # a wheel this much slower than the fastest axle slides (beyond sensor noise)
+# an episode carries timing only if the valve acted in it: the torque moved by this share of
+# the axle's largest (a wheel rolling under a steady brake has nothing to answer)
+VALVE_ACTION = 0.2
+MARGIN_SAMPLES = 3  # samples either side of a slide that belong to its episode
+MIN_SPEED_KMH = 10.0  # below this the wheel speeds' resolution is too coarse a clock
+MIN_EPISODES = 4  # fewer: no lag is measured (and no standard error could be)
+
+
+@dataclass
+class WheelLag:
+    """The lag (s) at which the wheels' adhesion force is smoothest, its jackknife standard
+    error (s), the number of slide episodes it rests on, and the score curve over
+    ``TAU_GRID_S`` (mean squared change of the force, N^2, per sample pair)."""
+
+    lag_s: float
+    se_s: float
+    episodes: int
+    score: np.ndarray
+
+    def as_dict(self) -> dict[str, float]:
+        return {"lag_s": self.lag_s, "se_s": self.se_s, "episodes": float(self.episodes)}
+
+
+def _refined_min(score: np.ndarray) -> float:
+    """The grid's minimum refined by a parabola through it and its neighbours (s)."""
+    k = int(np.argmin(score))
+    if 0 < k < len(score) - 1:
+        a, b, c = score[k - 1], score[k], score[k + 1]
+        den = a - 2.0 * b + c
+        if den > 0.0:
+            step = float(TAU_GRID_S[1] - TAU_GRID_S[0])
+            return float(TAU_GRID_S[k] + 0.5 * step * (a - c) / den)
+    return float(TAU_GRID_S[k])
+
+
+def wheel_lag(trace: Trace) -> WheelLag | None:
+    """The brake's lag behind the logged pressure from the sliding wheels (module docstring);
+    ``None`` where fewer than ``MIN_EPISODES`` slide episodes exist (a stop on which no wheel
+    slid says nothing about it) or the metadata gives no wheelset inertia."""
+    veh = trace.vehicle
+    inertia = float(veh.get("wheelset_inertia_kgm2", 0.0) or 0.0)
+    r = float(veh["wheel_radius_m"])
+    if inertia <= 0.0 or trace.n_axles < 2:
+        return None
+    t = trace.time_s
+    wheels = trace.v_axle_kmh
+    fastest = wheels.max(axis=1)
+    torque = trace.brake_torque_Nm()
+    per_episode: list[np.ndarray] = []
+    kernel = np.ones(2 * MARGIN_SAMPLES + 1)
+    for i in range(trace.n_axles):
+        v_kmh = wheels[:, i]
+        sliding = (fastest - v_kmh) > SLIDE_KMH
+        active = (np.convolve(sliding.astype(float), kernel, "same") > 0) & (
+            fastest > MIN_SPEED_KMH
+        )
+        pair = active[1:] & active[:-1]
+        if not pair.any():
+            continue
+        accel = np.gradient(v_kmh / 3.6, t)  # m/s^2 at the rim
+        inertial = inertia * accel / (r * r)  # N
+        # episodes: contiguous runs of active sample pairs
+        edges = np.diff(np.concatenate([[0], pair.astype(int), [0]]))
+        starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+        lagged = np.stack(
+            [np.interp(t - tau, t, torque[:, i], left=0.0) for tau in TAU_GRID_S], axis=0
+        )  # (n_tau, T)
+        force = inertial[None, :] + lagged / r  # the adhesion force at each lag
+        change2 = np.diff(force, axis=1) ** 2  # (n_tau, T-1)
+        big = float(torque[:, i].max())
+        for a, b in zip(starts, ends, strict=True):
+            seg = torque[a : b + 1, i]
+            if b - a >= 2 and big > 0.0 and np.ptp(seg) >= VALVE_ACTION * big:
+                per_episode.append(np.concatenate([change2[:, a:b].sum(axis=1), [b - a]]))
+    if len(per_episode) < MIN_EPISODES:
+        return None
+    table = np.stack(per_episode, axis=0)  # (episodes, n_tau + 1): sums and pair counts
+    sums, counts = table[:, :-1], table[:, -1]
+    total = sums.sum(axis=0) / counts.sum()
+    lag = _refined_min(total)
+    m = len(table)
+    leave_one_out = np.array(
+        [_refined_min((sums.sum(axis=0) - sums[j]) / (counts.sum() - counts[j])) for j in range(m)]
+    )
+    se = float(np.sqrt((m - 1) / m * np.sum((leave_one_out - leave_one_out.mean()) ** 2)))
+    return WheelLag(lag, se, m, total)
+
+
+__all__ = ["TAU_GRID_S", "WheelLag", "wheel_lag"]
