@@ -142,3 +142,16 @@ def test_pads_and_resistance_inside_their_own_tolerance_are_negligible(
 ):
     reason = negligible(category, params, gradient_trace)
     assert (reason is not None) == small, reason
+
+
+def test_forces_that_cancel_are_a_compensation():
+    from types import SimpleNamespace
+
+    from wsp_env.calibration.plausibility import cancelling_forces
+
+    trace = SimpleNamespace(v_train_kmh=np.linspace(100.0, 0.0, 101))
+    push = np.full(101, -5000.0)
+    brake = np.full(101, 4000.0)
+    assert "cancel" in cancelling_forces(push, brake, trace, "a and b")
+    assert cancelling_forces(push, -brake, trace, "a and b") is None  # they add up
+    assert cancelling_forces(push, 0.3 * brake, trace, "a and b") is None  # one dominates

@@ -74,3 +74,15 @@ def test_a_pressure_lag_the_balance_missed_is_found_on_the_wheels(tmp_path, seed
     assert step.parameters["lag_s"] == pytest.approx(0.2, abs=0.05)
     assert step.confidence["wheel_lag_s"] == step.parameters["lag_s"]
     assert result.wheel_lag["verdict"] == "late"
+
+
+# pair 3 of the power study (a 4 kN unmeasured brake force and a 0.3 s pressure lag): the force
+# was added first (a lag looks like a constant force during the stop) and the lag, alone on
+# what the force left, only undid it; with the wheels' lag the force is refitted alongside it
+@pytest.mark.parametrize("seed", [502009, 502018])
+def test_a_lag_the_wheels_measured_is_found_under_a_force_effect(tmp_path, seed):
+    trace = _trace(tmp_path, seed, [("unmeasured_brake_force", 4000.0), ("pressure_lag", 0.3)])
+    result = discover(trace)
+    found = {s.category: s for s in result.added if s.channel == "train_speed_balance_kmh"}
+    assert set(found) == {"unmeasured_brake_force", "pressure_lag"}, list(found)
+    assert found["pressure_lag"].parameters["lag_s"] == pytest.approx(0.3, abs=0.06)

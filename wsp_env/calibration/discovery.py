@@ -91,6 +91,7 @@ from wsp_env.calibration.adhesion_estimate import (
 from wsp_env.calibration.plausibility import (
     LAG_MIN_S,
     SPEED_LAG_MAX_S,
+    cancelling_forces,
     channel_health,
     implausible,
     implied_force_N,
@@ -582,6 +583,10 @@ STEP_MIN_SLIDES = 8
 # sensor offset for adhesion (measured on independent clean traces: 6 of the 7 adhesion false
 # positives of three held-out sets of 100 were stops without a single slide).
 ADHESION_MIN_SLIDES = STEP_MIN_SLIDES
+# and enough critical points for the extended law: this many per fitted parameter (law,
+# cleaning, trend and extension together); a clean 8-axle trace with 17 points once took a
+# load transfer and a friction step (dBIC -14 and -19) from them
+ADHESION_POINTS_PER_PARAM = 5
 SLIDE_MIN_CREEP = 0.03
 SLIDE_MIN_KMH = 2.0
 # A rail's adhesion falls with train speed (Curtius-Kniffler: mu = 0.161 + 7.5 / (V + 44), ~20 %
@@ -1007,6 +1012,33 @@ def _params_from(step: Step, coef: np.ndarray) -> dict[str, float]:
     return dict(p)  # a lag (pressure or ground speed) keeps its grid value
 
 
+def _balance_base(
+    trace: Trace, result: Result, residual0: np.ndarray, mask: np.ndarray
+) -> np.ndarray:
+    """The nominal balance residual ``residual0`` with a ground-speed scale chosen on the
+    coasting channel applied as found (the balance effects are fitted on top of it)."""
+    fixed = residual0.copy()
+    for st in result.added:
+        if st.channel == "coasting_creep_pct" and "speed_scale_error" in st.parameters:
+            drop = -masked_cumdiff(trace.v_train_kmh, balance_intervals(trace))
+            fixed = fixed + st.parameters["speed_scale_error"] * anchored(drop, trace.time_s, mask)
+    return fixed
+
+
+def _fit_lag_at_joint(
+    trace: Trace, result: Result, residual0: np.ndarray, mask: np.ndarray, tau: float
+) -> tuple[dict[str, float], np.ndarray]:
+    """The wheels' lag added to the balance effects already in, those refitted with it (a
+    force effect added first absorbed part of the lag: alone on what it left, the lag would
+    only undo that)."""
+    cols = [c for st in result.added if (cc := _step_columns(trace, st, residual0)) for c in cc]
+    if not cols:
+        return _fit_lag_at(trace, _balance_base(trace, result, residual0, mask), tau)
+    sig = _lag_signatures(trace, [tau])[1][0]
+    _, new = _linear(trace, _balance_base(trace, result, residual0, mask) - sig, mask, cols)
+    return {"lag_s": float(tau)}, new
+
+
 def _retest_balance(
     trace: Trace, result: Result, residual0: np.ndarray, mask: np.ndarray
 ) -> np.ndarray:
@@ -1016,14 +1048,18 @@ def _retest_balance(
     that a later one explains better, or one that only compensated for another. Kept effects
     get their joint parameters and the re-test's BIC gain in ``confidence``; returns the final
     residual."""
-    fixed = residual0.copy()
-    for st in result.added:  # a scale error chosen on the coasting channel acts here as found
-        if st.channel == "coasting_creep_pct" and "speed_scale_error" in st.parameters:
-            drop = -masked_cumdiff(trace.v_train_kmh, balance_intervals(trace))
-            fixed = fixed + st.parameters["speed_scale_error"] * anchored(drop, trace.time_s, mask)
+    fixed = _balance_base(trace, result, residual0, mask)
+    # a lag the wheels measured enters as measured (its signature whole, not a free amplitude
+    # a force effect could trade against), and stands on the wheels' evidence
+    by_wheels = [st for st in result.added if "wheel_lag_s" in st.confidence]
+    for st in by_wheels:
+        fixed = fixed - _lag_signatures(trace, [st.parameters["lag_s"]])[1][0]
     n = int(mask.sum())
     while True:
-        columns = [(st, _step_columns(trace, st, residual0)) for st in result.added]
+        columns = [
+            (st, None if st in by_wheels else _step_columns(trace, st, residual0))
+            for st in result.added
+        ]
         steps = [st for st, c in columns if c is not None]
         if not steps:
             return fixed
@@ -1040,8 +1076,6 @@ def _retest_balance(
             cut = 1.0 - math.sqrt(rss_full / max(rss_wo, 1e-300))
             st.confidence["retest_delta_bic"] = dbic
             st.confidence["retest_cut_pct"] = 100.0 * cut
-            if "wheel_lag_s" in st.confidence:  # a lag the wheels measured stands on that
-                continue
             if dbic > -MIN_DELTA_BIC or cut < 0.5 * MIN_REDUCTION:
                 if worst is None or dbic > worst[0]:
                     worst = (dbic, j)
@@ -1051,9 +1085,9 @@ def _retest_balance(
             for st, c in zip(steps, cols, strict=True):
                 st.parameters = _params_from(st, coef[start : start + len(c)])
                 start += len(c)
-                why = implausible(st.category, st.parameters, trace)
-                if "wheel_lag_s" not in st.confidence:
-                    why = why or negligible(st.category, st.parameters, trace)
+                why = negligible(st.category, st.parameters, trace) or implausible(
+                    st.category, st.parameters, trace
+                )
                 small = small or ((st, why) if why else None)
             if small is None:
                 return res_full
@@ -1208,7 +1242,9 @@ def _discover(trace: Trace) -> Result:
                     continue
                 if by_wheels:
                     assert wheels is not None
-                    fitted = _fit_lag_at(trace, res, wheels.lag_s)
+                    fitted = _fit_lag_at_joint(
+                        trace, result, chans[ch].residual, mask, wheels.lag_s
+                    )
                 else:
                     fitted = cand.fit(trace, res, mask)
                 if fitted is None:  # contradicted by another channel, or nothing stands out
@@ -1278,7 +1314,11 @@ def _discover(trace: Trace) -> Result:
                 for a in names:
                     _, r1 = _linear(trace, res, mask, [terms[a][0]])
                     single[a] = math.sqrt(float(np.sum(r1[mask] ** 2)) / n)
-                lag_alone = _fit_lag(trace, res, mask)[1]
+                if wheel == "late":  # the lag alone is the wheels' lag, not the grid's best
+                    assert wheels is not None
+                    lag_alone = _fit_lag_at(trace, res, wheels.lag_s)[1]
+                else:
+                    lag_alone = _fit_lag(trace, res, mask)[1]
                 single["pressure_lag"] = math.sqrt(float(np.sum(lag_alone[mask] ** 2)) / n)
                 fits = []  # (a, b, parameters of a, parameters of b, new residual)
                 for i, a in enumerate(names):
@@ -1316,7 +1356,7 @@ def _discover(trace: Trace) -> Result:
                     if not reason and forces[0] is not None and forces[1] is not None:
                         reason = negligible_force(
                             forces[0] + forces[1], trace, f"{a} + {b} together"
-                        )
+                        ) or cancelling_forces(forces[0], forces[1], trace, f"{a} and {b}")
                     if reason:
                         row["rejected"] = reason
                         continue
@@ -1361,6 +1401,14 @@ def _discover(trace: Trace) -> Result:
                 if fit is None or fit.at_bound:  # not identified (a parameter ran to its bound)
                     continue
                 rmse1, x, n = fit.rmse, fit.params, fit.residual_kN.size
+                if n < ADHESION_POINTS_PER_PARAM * x.size:  # too few points for the model
+                    result.considered.append({
+                        "name": cat, "category": cat, "channel": "adhesion_fit_kN",
+                        "before": adh_rmse, "after": rmse1, "delta_bic": float("nan"),
+                        "rejected": f"{n} critical points for {x.size} parameters: "
+                                    f"{ADHESION_POINTS_PER_PARAM} per parameter needed",
+                    })  # fmt: skip
+                    continue
                 null_chi2, null_rmse = adh_chi2, adh_rmse
                 if trial["speed_trend"] and not adhesion["speed_trend"]:
                     null_chi2, null_rmse = _step_null(

@@ -185,6 +185,33 @@ def negligible_force(force_N: np.ndarray, trace: Trace, what: str) -> str | None
     return None
 
 
+CANCEL_RATIO = 0.5
+
+
+def cancelling_forces(
+    force_a_N: np.ndarray, force_b_N: np.ndarray, trace: Trace, what: str
+) -> str | None:
+    """The reason two force effects fitted together are a compensation, not a finding: their
+    sum's RMS over the stop under ``CANCEL_RATIO`` of the larger one's (each one, large, is
+    there only to cancel the other: the data show the difference of their shapes, not their
+    sizes — e.g. a downhill gradient against an extra brake force on a trace whose coasting
+    lead-in and braking disagree)."""
+    moving = trace.v_train_kmh > 10.0
+    if not moving.any():
+        return None
+
+    def rms(f: np.ndarray) -> float:
+        return float(np.sqrt(np.mean(f[moving] ** 2)))
+
+    both, larger = rms(force_a_N + force_b_N), max(rms(force_a_N), rms(force_b_N))
+    if both < CANCEL_RATIO * larger:
+        return (
+            f"{what} cancel: {larger / 1e3:.2f} kN each, {both / 1e3:.2f} kN together (RMS over "
+            "the stop): one compensates the other"
+        )
+    return None
+
+
 def implied_force_N(category: str, params: dict[str, float], trace: Trace) -> np.ndarray | None:
     """The extra retarding force (N, per sample) a force effect adds to the nominal model, or
     ``None`` for an effect that is not a force (a lag, a sensor, a wheel, the adhesion)."""
@@ -250,6 +277,7 @@ def channel_health(trace: Trace, chans: dict[str, Any]) -> dict[str, dict[str, A
 
 
 __all__ = [
+    "cancelling_forces",
     "channel_health",
     "implausible",
     "implied_force_N",
