@@ -147,3 +147,43 @@ def test_eq9_peak_interpolated_over_many_speeds_matches_the_direct_maximum(law):
     np.testing.assert_allclose(eq9_peak(speeds, *law), direct, rtol=1e-3)
     few = speeds[:10]  # few speeds: computed directly
     np.testing.assert_array_equal(eq9_peak(few, *law), direct[:10])
+
+
+def _loads_trace(n_axles: int, **vehicle):
+    from pathlib import Path
+
+    from wsp_env.calibration.traces import Trace
+
+    veh = {"mass_kg": 40000.0 * max(n_axles // 4, 1), "n_axles": n_axles,
+           "wheel_radius_m": 0.46, **vehicle}  # fmt: skip
+    t = np.arange(3.0)
+    z = np.zeros((3, n_axles))
+    return Trace(Path("t.csv"), {"vehicle": veh}, t, np.full(3, 50.0), z + 50.0, z)
+
+
+@pytest.mark.parametrize("n_axles", [4, 8, 12])
+def test_a_rake_pitches_car_by_car(n_axles):
+    """The metadata's geometry describes one car: each car body of a 4c-axle rake (mass m / c)
+    pitches on its own bogies, ``(m / c) a h / L`` shared by the two axles of its leading bogie
+    and taken from its trailing one; the transfers sum to zero."""
+    from wsp_env.calibration.adhesion_estimate import G, normal_loads
+
+    trace = _loads_trace(n_axles, cog_height_m=1.5, bogie_centre_distance_m=19.0)
+    decel = np.array([0.0, 1.0, 2.0])
+    loads = normal_loads(trace, decel)
+    static = 40000.0 * G / 4
+    per_axle = 40000.0 * 1.0 * 1.5 / 19.0 / 2  # one car's mass, a = 1 m/s^2
+    want = static + per_axle * np.tile([1.0, 1.0, -1.0, -1.0], n_axles // 4)
+    assert loads[1] == pytest.approx(want, rel=1e-12)
+    assert loads[0] == pytest.approx(np.full(n_axles, static), rel=1e-12)
+    assert loads[2].sum() == pytest.approx(n_axles * static, rel=1e-12)
+
+
+def test_a_six_axle_vehicle_keeps_one_body():
+    """No four-axle cars to read: the front half gains ``m a h / L``, the rear half loses it."""
+    from wsp_env.calibration.adhesion_estimate import normal_loads
+
+    trace = _loads_trace(6, cog_height_m=1.5, bogie_centre_distance_m=10.0)
+    loads = normal_loads(trace, np.array([1.0, 1.0, 1.0]))
+    dn = 40000.0 * 1.5 / 10.0 / 3
+    assert loads[0] - loads[0].mean() == pytest.approx([dn] * 3 + [-dn] * 3, rel=1e-12)

@@ -216,3 +216,17 @@ def test_an_adhesion_extension_needs_enough_critical_points(tmp_path):
     assert not [s for s in result.added if s.channel == "adhesion_fit_kN"]
     why = [c.get("rejected", "") for c in result.considered if c["channel"] == "adhesion_fit_kN"]
     assert why and all("per parameter needed" in w for w in why)
+
+
+def test_a_vented_wheel_is_not_coasting(tmp_path):
+    """Held-out clean seed 6000007 (oil, 16 axles): axles vented by the WSP for 2 s while the
+    others brake read 1-3 % creep (spinning back up; the ground speed's timing under the train's
+    deceleration), once taken for worn leading wheels. Coasting is the train unbraked."""
+    from wsp_env.calibration.residuals import coasting_creep
+
+    trace, _, _ = _trace(tmp_path, 6000007)
+    mask = coasting_creep(trace).mask
+    first_brake = trace.time_s[np.argmax((trace.p_cyl_bar > 0.3).any(axis=1))]
+    assert mask.any() and trace.time_s[mask.any(axis=1)].max() < first_brake
+    assert (mask == mask[:, :1]).all()  # every axle alike
+    assert [s.category for s in discover(trace).added] == []

@@ -145,6 +145,11 @@ def normal_loads(trace: Trace, decel: np.ndarray) -> np.ndarray:
     axle, N = N_static + k a) when given; else the body's ``+- m a h / L`` on the leading /
     trailing bogie from ``cog_height_m`` and ``bogie_centre_distance_m`` (bogie pitch, which
     needs pivot heights, is then left to the calibration loop's ``load_transfer`` effect).
+    The geometry describes one car (two two-axle bogies ``L`` apart); a vehicle of ``4 c``
+    axles is read as a rake of ``c`` such cars of mass ``m / c`` each, every car body pitching
+    on its own bogies (coupled coaches: the couplers carry the longitudinal force, not the
+    body's pitch moment), so axles 1-2 of each car gain and 3-4 lose ``(m / c) a h / L / 2``.
+    Any other axle count keeps the one-body reading (front half gains, rear half loses).
     """
     veh = trace.vehicle
     n = trace.n_axles
@@ -156,6 +161,11 @@ def normal_loads(trace: Trace, decel: np.ndarray) -> np.ndarray:
     h, L = veh.get("cog_height_m"), veh.get("bogie_centre_distance_m")
     if transfer is not None and len(transfer) == n:
         out += decel[:, None] * np.asarray(transfer, dtype=float)[None, :] * 1e3
+    elif h and L and n % 4 == 0:
+        cars = n // 4
+        dn = (mass / cars) * decel * h / L / 2.0  # per axle of a car's leading / trailing bogie
+        sign = np.tile([1.0, 1.0, -1.0, -1.0], cars)
+        out += dn[:, None] * sign[None, :]
     elif h and L and n % 2 == 0:
         dn = mass * decel * h / L  # front bogie gains, rear loses; shared by its axles
         half = n // 2

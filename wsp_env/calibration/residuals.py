@@ -159,21 +159,24 @@ def coasting_creep(trace: Trace) -> Channel:
     p_th = float(brake.get("p_threshold_bar", 0.0))
     v = trace.v_train_kmh
     creep = 100.0 * (v[:, None] - trace.v_axle_kmh) / np.maximum(v[:, None], 1.0)
-    # coasting = unbraked since the start of the record (before the first application), or
-    # unbraked for COAST_MIN_S in a row: not a wheel spinning up after a WSP vent
-    unbraked = trace.p_cyl_bar < p_th + 0.05
-    mask = np.zeros_like(unbraked)
+    # coasting = the train unbraked (every axle) since the start of the record (before the
+    # first application), or for COAST_MIN_S in a row. One axle vented by its WSP while the
+    # others brake is no coasting wheel: it spins back up from a slide (on a contaminated rail
+    # for seconds), and the braking train's deceleration turns the ground speed's timing into
+    # apparent creep (held-out clean independent traces on oil read 1-3 % there, which the
+    # radius test took for worn leading wheels)
+    unbraked = (trace.p_cyl_bar < p_th + 0.05).all(axis=1)
+    coasting = np.zeros_like(unbraked)
     t = trace.time_s
-    for i in range(unbraked.shape[1]):
-        run_start = None
-        for k in range(len(t)):
-            if unbraked[k, i]:
-                run_start = k if run_start is None else run_start
-                if run_start == 0 or t[k] - t[run_start] >= COAST_MIN_S:
-                    mask[k, i] = True
-            else:
-                run_start = None
-    mask &= v[:, None] > MIN_SPEED_KMH
+    run_start = None
+    for k in range(len(t)):
+        if unbraked[k]:
+            run_start = k if run_start is None else run_start
+            if run_start == 0 or t[k] - t[run_start] >= COAST_MIN_S:
+                coasting[k] = True
+        else:
+            run_start = None
+    mask = np.repeat(coasting[:, None], trace.n_axles, axis=1) & (v[:, None] > MIN_SPEED_KMH)
     rmse = float(np.sqrt(np.mean(creep[mask] ** 2))) if mask.any() else float("nan")
     return Channel("coasting_creep", "pct", creep, mask, rmse, {"samples": float(mask.sum())})
 
