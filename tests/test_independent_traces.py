@@ -230,3 +230,20 @@ def test_a_vented_wheel_is_not_coasting(tmp_path):
     assert mask.any() and trace.time_s[mask.any(axis=1)].max() < first_brake
     assert (mask == mask[:, :1]).all()  # every axle alike
     assert [s.category for s in discover(trace).added] == []
+
+
+@pytest.mark.parametrize("seed", [503006, 503007])
+def test_a_gradient_survives_a_resistance_that_only_compensated(tmp_path, seed):
+    """Pair 4 of the power study (a 6 permille gradient and a 2 % ground-speed scale, 200 km/h):
+    the gradient, fitted before the scale was corrected, left a residue a running resistance
+    took; in the joint re-test the two shared the constant force, the gradient was dropped as
+    weak and the resistance then as propelling. A weak effect comes back when the effect it
+    was weak beside is dropped for good."""
+    trace, (grad, _), _ = _trace(tmp_path, seed, [("gradient", 6.0), ("sensor_scale", 0.02)])
+    result = discover(trace)
+    found = {s.category: s.parameters for s in result.added}
+    assert set(found) == {"gradient", "sensor"}, found
+    assert found["gradient"]["gradient_permille"] == pytest.approx(
+        grad.params["gradient_permille"], abs=1.0
+    )
+    assert any("propelling" in d["reason"] for d in result.dropped)

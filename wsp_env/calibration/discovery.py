@@ -1055,6 +1055,18 @@ def _retest_balance(
     for st in by_wheels:
         fixed = fixed - _lag_signatures(trace, [st.parameters["lag_s"]])[1][0]
     n = int(mask.sum())
+    # effects dropped as weak beside another: re-admitted when that one goes for good (a
+    # gradient judged weak beside a resistance that then turns out to propel the train)
+    weak: list[tuple[Step, dict[str, Any]]] = []
+
+    def drop_for_good(st: Step, why: str) -> None:
+        result.added.remove(st)
+        result.dropped.append({**st.as_dict(), "reason": f"re-test: {why}"})
+        for back, entry in weak:
+            result.added.append(back)
+            result.dropped.remove(entry)
+        weak.clear()
+
     while True:
         columns = [
             (st, None if st in by_wheels else _step_columns(trace, st, residual0))
@@ -1067,6 +1079,19 @@ def _retest_balance(
         k_all = sum(len(c) for c in cols)
         coef, res_full = _linear(trace, fixed, mask, [x for c in cols for x in c])
         rss_full = float(np.sum(res_full[mask] ** 2))
+        # an effect whose joint value is unphysical was there to compensate for another (a
+        # running resistance's constant term propelling the train beside a gradient that the
+        # scale correction moved): it goes first, before any is judged weak — else the sound
+        # one, sharing its shape, is dropped as weak and the other as implausible
+        joint, start = [], 0
+        for st, c in zip(steps, cols, strict=True):
+            joint.append(_params_from(st, coef[start : start + len(c)]))
+            start += len(c)
+        bad = [(st, why) for st, q in zip(steps, joint, strict=True)
+               if (why := implausible(st.category, q, trace))]  # fmt: skip
+        if bad:
+            drop_for_good(*bad[-1])  # the latest added
+            continue
         worst: tuple[float, int] | None = None
         for j, st in enumerate(steps):
             others = [x for i, c in enumerate(cols) if i != j for x in c]
@@ -1091,18 +1116,17 @@ def _retest_balance(
                 small = small or ((st, why) if why else None)
             if small is None:
                 return res_full
-            result.added.remove(small[0])
-            result.dropped.append({**small[0].as_dict(), "reason": f"re-test: {small[1]}"})
+            drop_for_good(*small)
             continue
         gone = steps[worst[1]]
         result.added.remove(gone)
-        result.dropped.append(
-            {**gone.as_dict(), "reason": (
-                f"re-test: with the other effects in, it gains BIC {-worst[0]:.1f} and cuts "
-                f"{gone.confidence['retest_cut_pct']:.1f} % (needs {MIN_DELTA_BIC:g} and "
-                f"{50 * MIN_REDUCTION:g} %)"
-            )}
-        )  # fmt: skip
+        entry = {**gone.as_dict(), "reason": (
+            f"re-test: with the other effects in, it gains BIC {-worst[0]:.1f} and cuts "
+            f"{gone.confidence['retest_cut_pct']:.1f} % (needs {MIN_DELTA_BIC:g} and "
+            f"{50 * MIN_REDUCTION:g} %)"
+        )}  # fmt: skip
+        result.dropped.append(entry)
+        weak.append((gone, entry))
 
 
 def _label(cand: Any) -> str:
