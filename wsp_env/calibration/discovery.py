@@ -631,7 +631,7 @@ def fit_adhesion_model(
     (``adhesion_estimate.cleaning_factor``, its gain the last parameter) stays in the model.
     ``speed_trend``: a first-order train-speed trend of the friction (``SPEED_TREND_MAX``).
     ``monotone``: the per-axle factors constrained to rise along the train (each axle's at
-    least the one's ahead: the rail cleaned by the axles ahead, ``MONOTONE``)."""
+    least the one's ahead: the rail cleaned by the axles ahead, ``_cleaning_explains``)."""
     if pts is None:
         pts = pooled_points(trace, MIN_SPEED_KMH)
     if len(pts) < 10:
