@@ -8,20 +8,15 @@ import dataclasses
 
 import numpy as np
 import pytest
+from test_independent_traces import _trace as independent_trace
 
-from wsp_env.calibration import independent as ind
 from wsp_env.calibration.discovery import discover
-from wsp_env.calibration.traces import read_trace
 from wsp_env.calibration.wheel_lag import wheel_lag
 
 
 def _trace(tmp_path, seed, effects=(), **overrides):
-    rng = np.random.default_rng(seed)
-    scenario = ind.random_scenario(rng, **overrides)
-    effs = [ind.random_effect(c, m, rng, scenario) for c, m in effects]
-    columns, meta = ind.generate(scenario, effs, seed=seed)
-    csv_path, _ = ind.write_trace(tmp_path / f"t{seed}", columns, meta)
-    return read_trace(csv_path)
+    """The independent generator's trace, read back (``test_independent_traces._trace``)."""
+    return independent_trace(tmp_path, seed, effects, **overrides)[0]
 
 
 @pytest.mark.parametrize("seed,lag", [(62001, 0.4), (62002, 0.4), (61012, 0.2)])

@@ -917,6 +917,12 @@ def _timing_signatures(trace: Trace, residual: np.ndarray, mask: np.ndarray) -> 
     return sigs
 
 
+def _timing_alone(residual: np.ndarray, mask: np.ndarray, timing: list[np.ndarray]) -> float:
+    """The balance's RMSE with the best sub-resolution lag (``_timing_signatures``) applied."""
+    rss = min(float(np.sum((residual - sig)[mask] ** 2)) for sig in timing)
+    return math.sqrt(rss / int(mask.sum()))
+
+
 def _against_timing(
     trace: Trace,
     residual: np.ndarray,
@@ -926,15 +932,14 @@ def _against_timing(
 ) -> tuple[float, float, np.ndarray]:
     """(RMSE the timing alone leaves, RMSE with ``columns`` fitted jointly with the timing,
     the columns' coefficients there)."""
-    n = int(mask.sum())
-    alone = min(float(np.sum((residual - sig)[mask] ** 2)) for sig in timing)
     best: tuple[float, np.ndarray] = (math.inf, np.zeros(len(columns)))
     for sig in timing:
         coef, res = _linear(trace, residual - sig, mask, columns)
         rss = float(np.sum(res[mask] ** 2))
         if rss < best[0]:
             best = (rss, coef)
-    return math.sqrt(alone / n), math.sqrt(best[0] / n), best[1]
+    joint = math.sqrt(best[0] / int(mask.sum()))
+    return _timing_alone(residual, mask, timing), joint, best[1]
 
 
 def _lag_beyond_timing(
@@ -944,8 +949,7 @@ def _lag_beyond_timing(
     from the logging's own timing, or ``None``: it must cut what the best sub-resolution lag
     leaves by ``MIN_REDUCTION / 2`` (half the usual bar: the two share their signature's
     shape, so what a longer lag cuts beyond the timing is its length's evidence alone)."""
-    n = int(mask.sum())
-    alone = math.sqrt(min(float(np.sum((residual - sig)[mask] ** 2)) for sig in timing) / n)
+    alone = _timing_alone(residual, mask, timing)
     if rmse_with_lag > (1.0 - 0.5 * MIN_REDUCTION) * alone:
         return (
             f"a lag under the logging's {LAG_MIN_S:g} s resolution leaves {alone:.3f} km/h, "
