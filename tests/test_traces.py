@@ -191,3 +191,60 @@ def test_missing_or_broken_metadata(trace_dir):
     (trace_dir / "empty.meta.json").write_text((trace_dir / "good.meta.json").read_text())
     with pytest.raises(TraceError, match="empty file"):
         read_trace(trace_dir / "empty.csv")
+
+
+def _logged_gps(mode: str, fix_period_s: float, log_period_s: float, seed: int):
+    """A GPS-like ground speed on a train decelerating at 1 m/s^2 (the truth, km/h), fixed
+    every ``fix_period_s`` and logged every ``log_period_s`` (+-30 ms clock jitter) by a logger
+    that holds the last value or averages over its period — built here on a 1 ms grid, apart
+    from every simulator in the project."""
+    rng = np.random.default_rng(seed)
+
+    def truth(t):
+        return np.maximum(120.0 - 3.6 * (t - 1.0).clip(0.0), 0.0)
+
+    fine = np.arange(0.0, 30.0, 0.001)
+    fix_t = np.arange(rng.uniform(0.0, fix_period_s), 30.0, fix_period_s)
+    held = truth(fix_t)[np.clip(np.searchsorted(fix_t, fine, side="right") - 1, 0, None)]
+    t_log = np.arange(1, int(29.0 / log_period_s)) * log_period_s
+    t_log = t_log + rng.uniform(-0.03, 0.03, t_log.size)
+    k = np.round(t_log / 0.001).astype(int)
+    if mode == "hold":
+        v = held[k]
+    else:
+        w = round(log_period_s / 0.001)
+        csum = np.concatenate([[0.0], np.cumsum(held)])
+        v = (csum[k + 1] - csum[k + 1 - w]) / w
+    return t_log, np.round(v, 2), truth
+
+
+@pytest.mark.parametrize(
+    ("mode", "fix_period_s", "log_period_s"),
+    [("hold", 0.2, 0.1), ("hold", 1.0, 0.1), ("mean", 0.5, 0.1), ("mean", 0.25, 0.05)],
+)
+def test_a_held_or_averaged_gps_is_put_back_on_time(mode, fix_period_s, log_period_s):
+    """The reader places every fix where it became due: a holding logger that shows some
+    fixes once (its clock jitters against a 5 Hz receiver) keeps them as fixes; an averaging
+    logger's blends time the change inside their window. Left on the log's timestamps the
+    held speed lags by half a fix period (0.1-0.5 s). Put back, an averaging logger's lag is
+    within 20 ms on each of six draws of the receiver's phase and the clock's jitter; a
+    holding logger cannot place a fix better than the log interval it showed up in (+-half a
+    period on one draw), so there the mean over the six draws is within 20 ms (the reader
+    before this change dropped the holding logger's single fixes as blends: -22 ms mean,
+    -48 ms on one draw, at 5 Hz logged at 10 Hz)."""
+    from wsp_env.calibration.traces import _unhold
+
+    lags = np.arange(-0.3, 0.6, 0.001)
+    found = []
+    for seed in range(6):
+        t, v, truth = _logged_gps(mode, fix_period_s, log_period_s, seed)
+        notes: list[str] = []
+        out, _ = _unhold(v, t, notes)
+        assert notes and ("averaged" in notes[0]) == (mode == "mean")
+        moving = (t > 2.0) & (out > 5.0)
+        err = [np.mean((out[moving] - truth(t[moving] - lag)) ** 2) for lag in lags]
+        raw = [np.mean((v[moving] - truth(t[moving] - lag)) ** 2) for lag in lags]
+        found.append(lags[int(np.argmin(err))])
+        assert abs(found[-1]) < (0.02 if mode == "mean" else 0.5 * log_period_s), seed
+        assert lags[int(np.argmin(raw))] > 0.3 * fix_period_s  # there was a lag to take out
+    assert abs(np.mean(found)) < 0.02

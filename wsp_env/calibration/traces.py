@@ -288,6 +288,7 @@ def read_trace(csv_path: str | Path) -> Trace:
             f"column 'time_s': not strictly increasing at line {int(bad[0]) + 3} "
             f"({t[bad[0]]:g} -> {t[bad[0] + 1]:g})",
         )
+    gap_filled = np.isnan(cols["v_train_kmh"])  # filled samples are no GPS update (_unhold)
     for name in required[1:]:
         cols[name] = _fill_gaps(path, name, cols[name], t, notes)
     for name in _OPTIONAL:
@@ -298,7 +299,7 @@ def read_trace(csv_path: str | Path) -> Trace:
             else:
                 cols[name] = _fill_gaps(path, name, cols[name], t, notes)
     _check_units(path, meta, cols, n)
-    cols["v_train_kmh"], v_noise = _unhold(cols["v_train_kmh"], t, notes)
+    cols["v_train_kmh"], v_noise = _unhold(cols["v_train_kmh"], t, notes, gap_filled)
     v_axle = np.stack([cols[f"v_axle_{i}_kmh"] for i in range(1, n + 1)], axis=1)
     p_cyl = np.stack([cols[f"p_cyl_{i}_bar"] for i in range(1, n + 1)], axis=1)
     optional = {k: cols[k] for k in _OPTIONAL if k in cols}
@@ -308,17 +309,30 @@ def read_trace(csv_path: str | Path) -> Trace:
 
 
 HELD_FRACTION = 0.3  # of the moving samples repeating the previous value exactly
+# of the levels inside the record shown for a single sample: at or above, the singles are an
+# averaging logger's blends (one at nearly every change of fix); below, a holding logger shows
+# an occasional fix once because its clock jitters against the fixes (measured on the
+# independent generator: holding loggers 0-25 %, averaging ones 33-100 %)
+BLEND_SINGLES_FRACTION = 0.3
 
 
-def _unhold(v: np.ndarray, t: np.ndarray, notes: list[str]) -> tuple[np.ndarray, float | None]:
+def _unhold(
+    v: np.ndarray, t: np.ndarray, notes: list[str], filled: np.ndarray | None = None
+) -> tuple[np.ndarray, float | None]:
     """A ground speed held between updates (a GPS fix every 0.1-1 s, logged faster, or held
     through a dropout) lags the true speed by up to an update interval and has no sample noise
     to measure. Where more than ``HELD_FRACTION`` of the moving samples repeat the previous
-    value exactly, each held level (a run of equal samples) is one update: placed half a log
-    period before the first sample that left the previous level (a fix falls anywhere inside
-    the logging period before it shows; a logger that averages shows it first as a blend,
-    which is dropped), and the speed is interpolated linearly between updates (noted). Returns
-    the speed and the noise measured on the updates (None where nothing was held)."""
+    value exactly, each held level (a run of equal samples) is one update, and the speed is
+    interpolated linearly between updates (noted).
+
+    When an update became due: a holding logger shows a fix at the first sample after it
+    arrived, so the fix is placed halfway between that sample and the one before. A logger
+    that averages over its period shows the change first as a blend of the two fixes, a single
+    sample (``BLEND_SINGLES_FRACTION`` tells the two loggers apart on the whole record): the
+    blend is dropped and its value places the change inside its averaging window — a blend
+    ``w v_prev + (1 - w) v_next`` says the previous fix filled the first ``w`` of the window.
+    Samples the reader interpolated across a gap (``filled``) are no update either.
+    Returns the speed and the noise measured on the updates (None where nothing was held)."""
     moving = v > 1.0
     repeats = np.concatenate([[False], np.diff(v) == 0.0])
     if moving.sum() < 10 or repeats[moving].mean() <= HELD_FRACTION:
@@ -327,13 +341,25 @@ def _unhold(v: np.ndarray, t: np.ndarray, notes: list[str]) -> tuple[np.ndarray,
     change = np.flatnonzero(np.diff(v) != 0.0) + 1  # first sample of every run
     starts = np.concatenate([[0], change])
     ends = np.concatenate([change, [v.size]])  # exclusive
+    inner = (ends - starts)[1:-1]
+    blends = inner.size > 0 and float(np.mean(inner == 1)) >= BLEND_SINGLES_FRACTION
     fix_t, fix_v = [], []
-    left = 0  # first sample after the previous held level
-    for a, b in zip(starts, ends, strict=True):
-        if b - a >= 2 or a == 0 or b == v.size:  # a held level (or the record's ends)
-            fix_t.append(t[left] - (0.5 * period if left > 0 else 0.0))
-            fix_v.append(v[a])
-            left = b
+    if filled is None:
+        filled = np.zeros(v.size, dtype=bool)
+    for j, (a, b) in enumerate(zip(starts, ends, strict=True)):
+        single = b - a == 1 and 0 < a and b < v.size
+        if (blends and single) or (0 < a and filled[a:b].all()):
+            continue  # a blend (it times the next level, below) or a gap the reader filled
+        if a == 0:
+            fix_t.append(t[0])
+        elif blends and ends[j - 1] - starts[j - 1] == 1 and not filled[a - 1]:
+            # the level after a blend: the change fell inside the blend's averaging window
+            prev, mix, nxt = fix_v[-1], v[a - 1], v[a]
+            w = (mix - nxt) / (prev - nxt) if prev != nxt else 0.5
+            fix_t.append(t[a - 1] - (1.0 - float(np.clip(w, 0.0, 1.0))) * period)
+        else:  # due somewhere after the previous sample: the middle of that interval
+            fix_t.append(0.5 * (t[a - 1] + t[a]))
+        fix_v.append(v[a])
     fix_t_arr = np.asarray(fix_t)
     keep = np.concatenate([[True], np.diff(fix_t_arr) > 0.0])
     fix_v_arr = np.asarray(fix_v)[keep]
@@ -341,8 +367,9 @@ def _unhold(v: np.ndarray, t: np.ndarray, notes: list[str]) -> tuple[np.ndarray,
     d2 = np.diff(fix_v_arr[fix_v_arr > 1.0], 2)  # white noise on a smooth speed: MAD of d2
     noise = float(np.median(np.abs(d2)) / 0.6745 / np.sqrt(6.0)) if d2.size >= 5 else None
     interval = float(np.median(np.diff(fix_t_arr))) if len(fix_t) > 1 else float("nan")
+    logger = "averaged (blends dropped)" if blends else "held"
     notes.append(
-        f"column 'v_train_kmh': held between updates (median interval {interval:.2f} s, "
+        f"column 'v_train_kmh': {logger} between updates (median interval {interval:.2f} s, "
         f"{100 * repeats[moving].mean():.0f} % of moving samples repeated): interpolated "
         "between the updates"
     )
