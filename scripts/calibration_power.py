@@ -151,12 +151,32 @@ def _run_one(job: dict[str, Any]) -> dict[str, Any]:
             true, value = _true_and_found(eff, hits[0], meta)
             row.update(true=true, value=value, cut=1.0 - hits[0]["after"] / hits[0]["before"])
         rows.append(row)
+    # the adhesion candidates' fits whether added or not (their first round): how often the
+    # loop could try them at all, and what they read against the truth
+    adhesion_fits = {}
+    for cat in ("load_transfer", "adhesion_position"):
+        row = next((c for c in result.considered if c["category"] == cat), None)
+        if row is not None and "parameters" in row:
+            adhesion_fits[cat] = row["parameters"]
+    true_pitch = _true_bogie_pitch(scenario, effects)
     expected = {LOOP_CATEGORY.get(e.category, e.category) for e in effects}
     extra = [s["category"] for s in added if s["category"] not in expected]
     return {**job, "effects_found": rows, "added": [s["category"] for s in added],
             "extra": extra, "gen_s": t_gen, "calibrate_s": t_cal,
             "n_axles": scenario.n_axles, "speed_kmh": scenario.speed_kmh,
-            "lead_in_s": scenario.lead_in_s}  # fmt: skip
+            "lead_in_s": scenario.lead_in_s, "contaminant": scenario.contaminant,
+            "adhesion_fits": adhesion_fits, "true_bogie_pitch_kN_per_mps2": true_pitch,
+            "effect_params": [e.params for e in effects]}  # fmt: skip
+
+
+def _true_bogie_pitch(scenario: Any, effects: list[Any]) -> float:
+    """The generator's bogie pitch per axle (kN per m/s^2, the cars' mean), times any load
+    transfer factor: what the loop's ``bogie_pitch_kN_per_mps2`` measures (the metadata gives
+    no pivot height, so the nominal model has none)."""
+    factor = math.prod(e.params["factor"] for e in effects if e.category == "load_transfer")
+    car_mass = 4000.0 * float(np.mean(scenario.car_axle_load_t))
+    pitch = car_mass * scenario.bogie_pivot_height_m / (2.0 * scenario.bogie_wheelbase_m)
+    return factor * pitch / 1e3
 
 
 def _jobs(args: argparse.Namespace) -> list[dict[str, Any]]:
@@ -201,6 +221,7 @@ def summarise(results: list[dict[str, Any]]) -> dict[str, Any]:
             if clean
             else math.nan,
             "added": sorted({c for r in clean for c in r["added"]}),
+            "bogie_pitch_fit_minus_true": clean_pitch_readings(clean),
         },
         "categories": {},
         "pairs": [],
@@ -232,6 +253,8 @@ def summarise(results: list[dict[str, Any]]) -> dict[str, Any]:
                 "extra_effect_rate": float(np.mean([bool(r["extra"]) for r in rs])),
                 "extra": sorted({c for r in rs for c in r["extra"]}),
             })  # fmt: skip
+            if cat in ("load_transfer", "adhesion_position"):
+                rows[-1].update(_adhesion_readings(cat, rs))
         detected = [row["magnitude"] for row in rows if row["detection_rate"] >= 0.9]
         target = GRID[cat][1]
         at_target = [row for row in rows if row["magnitude"] == target]
@@ -255,10 +278,47 @@ def summarise(results: list[dict[str, Any]]) -> dict[str, Any]:
     return out
 
 
+def _adhesion_readings(cat: str, rs: list[dict[str, Any]]) -> dict[str, Any]:
+    """How often the adhesion candidate could be fitted at all (enough slides, evidence on
+    both sides of a step) and what it read, added or not: the fitted bogie pitch against the
+    truth (kN per m/s^2), the fitted factor beyond a step against the truth."""
+    key = "bogie_pitch_kN_per_mps2" if cat == "load_transfer" else "factor_beyond_step"
+    fits = [r["adhesion_fits"][cat][key] for r in rs if cat in r.get("adhesion_fits", {})]
+    if cat == "load_transfer":
+        truth = [r["true_bogie_pitch_kN_per_mps2"] for r in rs if cat in r["adhesion_fits"]]
+    else:
+        truth = [r["effect_params"][0]["factor"] for r in rs if cat in r["adhesion_fits"]]
+    err = [abs(f - t) for f, t in zip(fits, truth, strict=True)]
+    return {
+        "tried_rate": len(fits) / len(rs),
+        "fitted_abs_error_median": float(np.median(err)) if err else math.nan,
+    }
+
+
+def clean_pitch_readings(results: list[dict[str, Any]]) -> dict[str, float]:
+    """On clean traces: the fitted bogie pitch less the generator's undeclared one (kN per
+    m/s^2), where the loop could fit it: the scatter a load transfer must stand out of."""
+    diff = [
+        r["adhesion_fits"]["load_transfer"]["bogie_pitch_kN_per_mps2"]
+        - r["true_bogie_pitch_kN_per_mps2"]
+        for r in results
+        if r.get("kind") == "clean" and "load_transfer" in r.get("adhesion_fits", {})
+    ]
+    if not diff:
+        return {"n": 0}
+    q = np.percentile(diff, [5, 50, 95])
+    return {"n": len(diff), "p5": float(q[0]), "median": float(q[1]), "p95": float(q[2])}
+
+
 def print_table(summary: dict[str, Any]) -> None:
     c = summary["clean"]
     print(f"clean traces: {c['n']}, false positives {100 * c['false_positive_rate']:.1f} % "
           f"(target <= {100 * TARGETS['false_positive_max']:g} %) {c['added']}")  # fmt: skip
+    pitch = c.get("bogie_pitch_fit_minus_true", {})
+    if pitch.get("n"):
+        print(f"clean traces' bogie pitch, fitted less the generator's (kN per m/s^2, "
+              f"{pitch['n']} fitted): median {pitch['median']:+.1f}, 5-95 % "
+              f"{pitch['p5']:+.1f} .. {pitch['p95']:+.1f}")  # fmt: skip
     print(f"{'category':24s} {'magnitude':>10s} {'n':>4s} {'detect':>7s} {'or alt':>7s} "
           f"{'param err':>9s} {'cut':>6s} {'extra':>6s}")  # fmt: skip
     for cat, info in summary["categories"].items():
@@ -270,6 +330,11 @@ def print_table(summary: dict[str, Any]) -> None:
                   f"{100 * row['found_or_named_rate']:6.0f}% {err:8.0f}% "
                   f"{100 * row['cut_median']:5.0f}% {100 * row['extra_effect_rate']:5.0f}%{mark}"
                   f"{' ' + ','.join(row['extra']) if row['extra'] else ''}")  # fmt: skip
+        for row in info["rows"]:
+            if "tried_rate" in row:
+                print(f"{'':24s} {row['magnitude']:10.4g}: fitted at all on "
+                      f"{100 * row['tried_rate']:.0f} %, |fitted - true| median "
+                      f"{row['fitted_abs_error_median']:.3g}")  # fmt: skip
         print(f"{'':24s} smallest detected >= 90 %: {info['smallest_90pct']}")
     for p in summary["pairs"]:
         print(f"pair {p['effects']}: both found {100 * p['both_found_rate']:.0f} % "

@@ -149,7 +149,11 @@ def test_forces_that_cancel_are_a_compensation():
 
     from wsp_env.calibration.plausibility import cancelling_forces
 
-    trace = SimpleNamespace(v_train_kmh=np.linspace(100.0, 0.0, 101))
+    trace = SimpleNamespace(
+        v_train_kmh=np.linspace(100.0, 0.0, 101),
+        vehicle={"brake": {"p_threshold_bar": 0.2}},
+        p_cyl_bar=np.full((101, 4), 3.0),
+    )
     push = np.full(101, -5000.0)
     brake = np.full(101, 4000.0)
     assert "cancel" in cancelling_forces(push, brake, trace, "a and b")

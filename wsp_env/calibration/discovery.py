@@ -1209,6 +1209,35 @@ def _lag_verdict(trace: Trace, tie: list[tuple]) -> list[tuple]:
     return [q for q in tie if id(q) not in out]
 
 
+LAW_KEYS = ("mu0", "K", "K_rozv", "recovery_gain")
+
+
+def _adhesion_params(
+    trace: Trace, key: str, trial: dict[str, bool], fit: LawFit, step_m: float
+) -> dict[str, float]:
+    """The law's and the tried extension's parameters of an extended adhesion fit, by name
+    (the fit's vector: the law, per-axle factors, pitch, step factor, speed trend, cleaning)."""
+    x = fit.params
+    params = {"mu0": x[0], "K": x[1], "K_rozv": x[2]}
+    if fit.n_law == 4:
+        params["recovery_gain"] = x[3]
+    extra = list(x[fit.n_law :])
+    axle_f = extra[: trace.n_axles - 1] if trial["per_axle"] else []
+    rest = extra[len(axle_f) :]
+    pitch = rest[:1] if trial["load_transfer"] else []
+    segs = rest[len(pitch) :]
+    if key == "per_axle":
+        params.update({f"axle_{i + 2}_factor": v for i, v in enumerate(axle_f)})
+    elif key == "load_transfer":
+        params["bogie_pitch_kN_per_mps2"] = pitch[0]
+    else:
+        params.update({"step_position_m": step_m, "factor_beyond_step": segs[0]})
+    if trial["speed_trend"]:
+        last_is_cleaning = trial["cleaning"] and not trial["per_axle"]
+        params["speed_trend_per_100kmh"] = segs[-2 if last_is_cleaning else -1]
+    return {k: float(v) for k, v in params.items()}
+
+
 def _bic(rss: float, n: int, k: int) -> float:
     return n * math.log(max(rss, 1e-300) / n) + k * math.log(n)
 
@@ -1369,7 +1398,11 @@ def _discover(trace: Trace) -> Result:
         if n >= 10 and pair_ok:
             rss0 = float(np.sum(res[mask] ** 2))
             rmse0 = math.sqrt(rss0 / n)
-            if rmse0 >= NOISE_FACTOR * floors[ch]:
+            # under the noise gate only a lag the wheels measured is tried, with each force
+            # beside it: a force that cancels part of the lag's signature (an extra brake force
+            # against a late brake) leaves the balance quiet, and the lag alone makes it worse
+            quiet = rmse0 < NOISE_FACTOR * floors[ch]
+            if not quiet or wheel == "late":
                 terms = _pair_terms(trace)
                 names = list(terms)
                 single = {}
@@ -1383,7 +1416,7 @@ def _discover(trace: Trace) -> Result:
                     lag_alone = _fit_lag(trace, res, mask)[1]
                 single["pressure_lag"] = math.sqrt(float(np.sum(lag_alone[mask] ** 2)) / n)
                 fits = []  # (a, b, parameters of a, parameters of b, new residual)
-                for i, a in enumerate(names):
+                for i, a in enumerate(names if not quiet else ()):
                     for b in names[i + 1 :]:
                         coef, new = _linear(trace, res, mask, [terms[a][0], terms[b][0]])
                         fits.append((a, b, terms[a][1](coef[0]), terms[b][1](coef[1]), new))
@@ -1488,24 +1521,9 @@ def _discover(trace: Trace) -> Result:
                 if null_rmse != adh_rmse:
                     row["before_with_speed_trend"] = null_rmse
                 rows.append([row, None])
+                params = _adhesion_params(trace, key, trial, fit, step_m)
+                row["parameters"] = {k: v for k, v in params.items() if k not in LAW_KEYS}
                 if dbic < -MIN_DELTA_BIC and gain >= MIN_REDUCTION_ADHESION and beats_trend:
-                    params = {"mu0": x[0], "K": x[1], "K_rozv": x[2]}
-                    if fit.n_law == 4:
-                        params["recovery_gain"] = x[3]
-                    extra = list(x[fit.n_law :])
-                    axle_f = extra[: trace.n_axles - 1] if trial["per_axle"] else []
-                    rest = extra[len(axle_f) :]
-                    pitch = rest[:1] if trial["load_transfer"] else []
-                    segs = rest[len(pitch) :]
-                    if key == "per_axle":
-                        params.update({f"axle_{i + 2}_factor": v for i, v in enumerate(axle_f)})
-                    elif key == "load_transfer":
-                        params["bogie_pitch_kN_per_mps2"] = pitch[0]
-                    else:
-                        params.update({"step_position_m": step_m, "factor_beyond_step": segs[0]})
-                    if trial["speed_trend"]:
-                        last_is_cleaning = trial["cleaning"] and not trial["per_axle"]
-                        params["speed_trend_per_100kmh"] = segs[-2 if last_is_cleaning else -1]
                     reason = implausible(cat, params, trace)
                     if not reason and key == "per_axle":
                         reason = _cleaning_explains(

@@ -134,7 +134,7 @@ def negligible(category: str, params: dict[str, float], trace: Trace) -> str | N
     formula's accuracy (``RESISTANCE_REL_MIN``).
     Such effects are statistically real on long clean records (the logger's own sampling,
     averaging and fix timing produce them) and physically nothing. Every force effect is
-    judged by the force it adds (``implied_force_N``, RMS over the stop above 10 km/h) against
+    judged by the force it adds (``implied_force_N``, RMS over the stop, ``stop_samples``) against
     a permille of the vehicle's weight, the force of the smallest gradient reported — so a
     two-parameter effect whose parameters cancel is as negligible as its force."""
     force = implied_force_N(category, params, trace)
@@ -170,11 +170,22 @@ def negligible(category: str, params: dict[str, float], trace: Trace) -> str | N
     return None
 
 
+def stop_samples(trace: Trace) -> np.ndarray:
+    """The stop: from the brake application (the first sample with a cylinder 0.05 bar above
+    the brake's threshold) while the train runs above 10 km/h. A coasting lead-in is no part
+    of it: a force that acts with the brake would otherwise be judged smaller the longer the
+    logger ran before the driver braked."""
+    p_th = float(trace.vehicle.get("brake", {}).get("p_threshold_bar", 0.0))
+    braked = np.maximum.accumulate((trace.p_cyl_bar > p_th + 0.05).any(axis=1))
+    stop = braked & (trace.v_train_kmh > 10.0)
+    return stop if stop.any() else trace.v_train_kmh > 10.0
+
+
 def negligible_force(force_N: np.ndarray, trace: Trace, what: str) -> str | None:
     """The reason an extra retarding force (N, per sample) is too small to report: its RMS
-    over the stop above 10 km/h under the force of a ``GRADIENT_MIN_PERMILLE`` gradient."""
+    over the stop (``stop_samples``) under the force of a ``GRADIENT_MIN_PERMILLE`` gradient."""
     force_min = GRADIENT_MIN_PERMILLE * 1e-3 * float(trace.vehicle["mass_kg"]) * G
-    moving = trace.v_train_kmh > 10.0
+    moving = stop_samples(trace)
     rms = float(np.sqrt(np.mean(force_N[moving] ** 2))) if moving.any() else 0.0
     if rms < force_min:
         return (
@@ -196,7 +207,7 @@ def cancelling_forces(
     there only to cancel the other: the data show the difference of their shapes, not their
     sizes — e.g. a downhill gradient against an extra brake force on a trace whose coasting
     lead-in and braking disagree)."""
-    moving = trace.v_train_kmh > 10.0
+    moving = stop_samples(trace)
     if not moving.any():
         return None
 
@@ -284,4 +295,5 @@ __all__ = [
     "negligible",
     "negligible_force",
     "resistance_change_N",
+    "stop_samples",
 ]
