@@ -186,6 +186,22 @@ def test_a_force_with_the_brake_is_judged_over_the_stop_not_the_lead_in(tmp_path
     assert np.sqrt(np.mean(with_brake[moving] ** 2)) < 1e-3 * weight
 
 
+def test_a_quiet_balance_is_tried_but_a_candidate_must_cut_a_noise_floor(tmp_path):
+    """Seed 81017 of the power study (oil, 16 axles, 1 Hz GPS): a 0.2 s ground-speed lag
+    leaves the balance under twice its noise floor; between 1.5 and 2 floors a candidate is
+    tried and must cut a whole floor, which the lag does. Held-out clean seed 18000026 (wet, 16
+    axles): a 2.3 kN brake force cut the same quiet balance by half a floor only."""
+    result = discover(_trace(tmp_path, 81017, [("sensor_lag", 0.2)])[0])
+    lags = [s.parameters["speed_lag_s"] for s in result.added if "speed_lag_s" in s.parameters]
+    assert lags == [pytest.approx(0.2, abs=0.06)], [
+        (s.category, s.parameters) for s in result.added
+    ]
+    assert result.added[0].confidence["cut_over_noise_floor"] >= 1.0
+    clean = discover(_trace(tmp_path, 18000026)[0])
+    assert clean.added == []
+    assert any("quiet" in c.get("rejected", "") for c in clean.considered)
+
+
 @pytest.mark.parametrize("seed", [31, 32])
 def test_a_late_ground_speed_is_not_taken_for_a_late_brake(tmp_path, seed):
     """0.4 s of ground-speed lag: the balance alone cannot tell it from a pressure lag; the

@@ -529,6 +529,7 @@ RECOVERY_GRID_KW = tuple(
     (w, span) for w in (0.5, 1.0, 2.0, 4.0, 8.0) for span in (2.0, 5.0, 10.0, 20.0)
 )
 RECOVERY_MIN_DELTA_BIC = 10.0
+RECOVERY_NONE = 1e-6  # a cell whose removed fraction stays under this at every point is no recovery
 RECOVERY_FULL_FITS = 4  # of the 20 grid cells, after a quick screening (``fit_base_law``)
 
 
@@ -577,6 +578,8 @@ def fit_base_law(
     screened: list[tuple[float, tuple[float, float], np.ndarray]] = []
     for w_lim, w_span in RECOVERY_GRID_KW:
         removed = removed_fraction(trace, w_lim, w_span)[pts.sample, pts.axle]
+        if not np.any(removed > RECOVERY_NONE):  # no slide reached W_lim: the plain law, and
+            continue  # an unidentified gain that only slows the fit (a wet stop: 12 of 20 cells)
         quick = fit_law(pts, removed=removed, censored=censored, reweight=0)
         if quick is not None:
             screened.append((quick.chi2, (w_lim, w_span), removed))
