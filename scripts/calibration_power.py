@@ -68,6 +68,12 @@ LOOP_CATEGORY = {"sensor_scale": "sensor", "sensor_lag": "sensor"}
 # other draw of the scenario is unchanged.
 ADHESION_CATEGORIES = ("load_transfer", "adhesion_position", "adhesion_per_axle")
 SLIDING_RAILS = (("soap", "leaves", "oil"), (0.45 / 0.7, 0.15 / 0.7, 0.1 / 0.7))
+# a friction change is observable where some axle is past the friction curve's peak for this
+# long on each side of it (generator truth); the loop has evidence there with this many of its
+# critical points at a slide (SLIDE_POINT_KMH or more) on each side
+OBSERVABLE_S = 1.0
+OBSERVABLE_POINTS = 3
+SLIDE_POINT_KMH = 1.0
 TARGETS = {"false_positive_max": 0.02, "detection_min": 0.90, "pairs_min": 0.80}
 
 
@@ -130,7 +136,8 @@ def _run_one(job: dict[str, Any]) -> dict[str, Any]:
         csv_path, _ = ind.write_trace(Path(tmp) / "t", columns, meta)
         t1 = time.perf_counter()
         try:
-            result = discover(read_trace(csv_path))
+            trace = read_trace(csv_path)
+            result = discover(trace)
         except Exception as err:  # a crash is a finding, reported, not hidden
             return {**job, "error": f"{type(err).__name__}: {err}", "gen_s": t_gen}
         t_cal = time.perf_counter() - t1
@@ -159,6 +166,9 @@ def _run_one(job: dict[str, Any]) -> dict[str, Any]:
         if row is not None and "parameters" in row:
             adhesion_fits[cat] = row["parameters"]
     true_pitch = _true_bogie_pitch(scenario, effects)
+    step = next((e for e in effects if e.category == "adhesion_position"), None)
+    if step is not None:
+        adhesion_fits["evidence"] = _step_evidence(ind, scenario, effects, step, job["seed"], trace)
     expected = {LOOP_CATEGORY.get(e.category, e.category) for e in effects}
     extra = [s["category"] for s in added if s["category"] not in expected]
     return {**job, "effects_found": rows, "added": [s["category"] for s in added],
@@ -167,6 +177,30 @@ def _run_one(job: dict[str, Any]) -> dict[str, Any]:
             "lead_in_s": scenario.lead_in_s, "contaminant": scenario.contaminant,
             "adhesion_fits": adhesion_fits, "true_bogie_pitch_kN_per_mps2": true_pitch,
             "effect_params": [e.params for e in effects]}  # fmt: skip
+
+
+def _step_evidence(ind: Any, scenario: Any, effects: list[Any], step: Any, seed: int,
+                   trace: Any) -> dict[str, float]:  # fmt: skip
+    """What a friction change along the rail leaves to be seen, on each side of it: seconds
+    during which some axle is past the friction curve's peak (the generator's truth,
+    ``independent.sliding_around``), and the loop's critical points at a slide (sliding by
+    ``SLIDE_POINT_KMH`` or more: the points that bear on the rail's level, not the creep curve's
+    initial slope), placed by the train's distance run since the brake application."""
+    from scipy.integrate import cumulative_trapezoid
+
+    from wsp_env.calibration.adhesion_estimate import pooled_points
+    from wsp_env.calibration.residuals import MIN_SPEED_KMH
+
+    position = float(step.params["position_m"])
+    before_s, after_s = ind.sliding_around(scenario, effects, position, seed=seed)
+    run_m = cumulative_trapezoid(trace.v_train_kmh / 3.6, trace.time_s, initial=0.0)
+    x_brake = float(np.interp(scenario.lead_in_s, trace.time_s, run_m))
+    pts = pooled_points(trace, MIN_SPEED_KMH)
+    at_slide = pts.sliding_kmh >= SLIDE_POINT_KMH
+    xi = pts.position_m - x_brake
+    return {"past_peak_s_before": before_s, "past_peak_s_after": after_s,
+            "points_before": int(np.sum(at_slide & (xi < position))),
+            "points_after": int(np.sum(at_slide & (xi >= position)))}  # fmt: skip
 
 
 def _true_bogie_pitch(scenario: Any, effects: list[Any]) -> float:
@@ -289,10 +323,22 @@ def _adhesion_readings(cat: str, rs: list[dict[str, Any]]) -> dict[str, Any]:
     else:
         truth = [r["effect_params"][0]["factor"] for r in rs if cat in r["adhesion_fits"]]
     err = [abs(f - t) for f, t in zip(fits, truth, strict=True)]
-    return {
+    out = {
         "tried_rate": len(fits) / len(rs),
         "fitted_abs_error_median": float(np.median(err)) if err else math.nan,
     }
+    ev = [r["adhesion_fits"]["evidence"] for r in rs if "evidence" in r.get("adhesion_fits", {})]
+    if ev:  # a step: is there anything to see on both sides, in truth and for the loop
+        out["past_peak_both_sides_rate"] = float(
+            np.mean(
+                [min(e["past_peak_s_before"], e["past_peak_s_after"]) >= OBSERVABLE_S for e in ev]
+            )
+        )
+        out["points_both_sides_rate"] = float(
+            np.mean([min(e["points_before"], e["points_after"]) >= OBSERVABLE_POINTS for e in ev])
+        )
+        out["points_before_median"] = float(np.median([e["points_before"] for e in ev]))
+    return out
 
 
 def clean_pitch_readings(results: list[dict[str, Any]]) -> dict[str, float]:
@@ -335,6 +381,13 @@ def print_table(summary: dict[str, Any]) -> None:
                 print(f"{'':24s} {row['magnitude']:10.4g}: fitted at all on "
                       f"{100 * row['tried_rate']:.0f} %, |fitted - true| median "
                       f"{row['fitted_abs_error_median']:.3g}")  # fmt: skip
+            if "past_peak_both_sides_rate" in row:
+                print(f"{'':24s} {'':10s}  past the curve's peak >= {OBSERVABLE_S:g} s on both "
+                      f"sides (truth) {100 * row['past_peak_both_sides_rate']:.0f} %; >= "
+                      f"{OBSERVABLE_POINTS} critical points at a slide (>= {SLIDE_POINT_KMH:g} "
+                      f"km/h) on both sides "
+                      f"{100 * row['points_both_sides_rate']:.0f} % (median before the "
+                      f"change {row['points_before_median']:.0f})")  # fmt: skip
         print(f"{'':24s} smallest detected >= 90 %: {info['smallest_90pct']}")
     for p in summary["pairs"]:
         print(f"pair {p['effects']}: both found {100 * p['both_found_rate']:.0f} % "

@@ -14,17 +14,23 @@ import numpy as np
 SCRIPTS = Path(__file__).resolve().parents[1] / "scripts"
 
 
-def test_the_power_study_reports_the_adhesion_readings(tmp_path):
+def _study(tmp_path: Path, category: str, clean: int) -> dict:
+    """The study on one scenario per magnitude of ``category`` and ``clean`` clean traces, as
+    its JSON gives it."""
     sys.path.insert(0, str(SCRIPTS))
     try:
         import calibration_power as cp
     finally:
         sys.path.remove(str(SCRIPTS))
     out = tmp_path / "power.json"
-    args = ["--scenarios", "1", "--clean", "2", "--pairs", "0", "--jobs", "1",
-            "--categories", "load_transfer", "--json", str(out)]  # fmt: skip
+    args = ["--scenarios", "1", "--clean", str(clean), "--pairs", "0", "--jobs", "1",
+            "--categories", category, "--json", str(out)]  # fmt: skip
     assert cp.main(args) == 0
-    data = json.loads(out.read_text())
+    return json.loads(out.read_text())
+
+
+def test_the_power_study_reports_the_adhesion_readings(tmp_path):
+    data = _study(tmp_path, "load_transfer", clean=2)
     summary, results = data["summary"], data["results"]
     assert summary["traces"] == 2 + 3 and not summary["errors"]
     rows = summary["categories"]["load_transfer"]["rows"]
@@ -38,3 +44,18 @@ def test_the_power_study_reports_the_adhesion_readings(tmp_path):
         for fitted in r["adhesion_fits"].values():
             assert all(np.isfinite(v) for v in fitted.values())
     assert 0.0 <= summary["clean"]["false_positive_rate"] <= 1.0
+
+
+def test_the_power_study_says_what_a_friction_step_leaves_to_see(tmp_path):
+    """A friction change along the rail: the generator's seconds past the curve's peak on
+    each side of it and the loop's critical points there, per trace and summarised."""
+    data = _study(tmp_path, "adhesion_position", clean=0)
+    for r in data["results"]:
+        ev = r["adhesion_fits"]["evidence"]
+        assert ev["past_peak_s_before"] >= 0.0 and ev["past_peak_s_after"] >= 0.0
+        # both sides of one stop: no more than the stop lasted, and a sliding rail slides
+        assert 1.0 < ev["past_peak_s_before"] + ev["past_peak_s_after"] < 200.0
+        assert ev["points_before"] >= 0 and ev["points_after"] >= 0
+    for row in data["summary"]["categories"]["adhesion_position"]["rows"]:
+        assert 0.0 <= row["past_peak_both_sides_rate"] <= 1.0
+        assert 0.0 <= row["points_both_sides_rate"] <= 1.0

@@ -54,6 +54,20 @@ def test_same_seed_same_trace_and_the_wheels_never_turn_backwards():
     assert a["v_train_kmh"][-1] < 2.0  # the record runs to the stop
 
 
+def test_the_generators_truth_says_where_the_wheels_meet_the_adhesion_limit():
+    """``sliding_around`` splits the seconds past the friction curve's peak at a rail
+    position: nothing past the stop, everything before it; a dry rail's emergency stop never
+    passes the peak; a soap stop does, and the split adds up whatever the position."""
+    soap = ind.random_scenario(np.random.default_rng(5), contaminant="soap", speed_kmh=120.0)
+    before, after = ind.sliding_around(soap, [], 1e5, seed=5)
+    assert before > 2.0 and after == 0.0
+    b2, a2 = ind.sliding_around(soap, [], 100.0, seed=5)
+    assert b2 > 0.0 and a2 > 0.0 and b2 + a2 >= before - 1e-9  # an instant may count on both
+    assert ind.sliding_around(soap, [], -1e5, seed=5) == (0.0, before)
+    dry = ind.random_scenario(np.random.default_rng(5), contaminant="dry", speed_kmh=120.0)
+    assert ind.sliding_around(dry, [], 100.0, seed=5) == (0.0, 0.0)
+
+
 def test_a_held_ground_speed_is_interpolated_between_updates(tmp_path):
     trace, _, _ = _trace(tmp_path, 1, gps_rate_hz=1.0, log_period_s=0.1, log_mode="hold")
     assert any("held between updates" in n for n in trace.notes)

@@ -183,7 +183,8 @@ Several effects may be combined; two of the same category multiply (factors, sca
 (gradients, forces, lags, radius errors).
 
 Public API: ``Scenario``, ``Effect``, ``random_scenario``, ``generate``, ``write_trace``,
-``random_effect`` (see their docstrings). Everything random comes from the given
+``random_effect``, ``sliding_around`` (the truth a power study needs; see their docstrings).
+Everything random comes from the given
 ``numpy.random.Generator`` or seed: the same seed gives identical output.
 """
 
@@ -977,6 +978,36 @@ def _simulate(
 # ----------------------------------------------------------------------------------------
 # logger
 # ----------------------------------------------------------------------------------------
+
+
+def sliding_around(
+    scenario: Scenario,
+    effects: Sequence[Effect],
+    position_m: float,
+    seed: int | None = None,
+) -> tuple[float, float]:
+    """Seconds of adhesion-limited braking before and after rail coordinate ``position_m``.
+
+    From the generator's own 20 ms record (the truth, not the log): the time, between the
+    brake application and the stop, during which at least one axle's creep
+    ``(V - omega_i r_i) / max(V, 0.3)`` is past the friction curve's peak (``ln(c2/c3)/c2``),
+    split by whether that axle's rail coordinate (``X - X_b - d_i``, as for
+    ``adhesion_position``) is before or past ``position_m``. A friction change along the
+    rail can be seen by any method only where the wheels meet the adhesion limit on both sides
+    of it; the detection-power study reports how often they do.
+    """
+    sim = _simulate(scenario, effects, seed)
+    k_b = sim["k_brake"]
+    k_end = sim["k_stop"] if sim["k_stop"] > 0 else len(sim["t"])
+    sl = slice(k_b, k_end)
+    v = sim["V"][sl, None]
+    creep = (v - sim["omega"][sl] * sim["r_true"]) / np.maximum(v, 0.3)
+    c2, c3 = scenario.creep_c2, scenario.creep_c3
+    sliding = creep >= math.log(c2 / c3) / c2
+    xi = sim["X"][sl, None] - sim["X_brake"] - sim["offset"]
+    before = np.any(sliding & (xi < position_m), axis=1)
+    after = np.any(sliding & (xi >= position_m), axis=1)
+    return float(before.sum() * BCU_DT), float(after.sum() * BCU_DT)
 
 
 def _decimate(
