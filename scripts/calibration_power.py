@@ -21,7 +21,11 @@ equally good ``alternatives`` (the trace could not tell them apart; never counte
 detected), the median relative parameter error, the median channel cut, the rate of extra
 effects; per category the smallest magnitude detected in >= 90 % of scenarios; the
 false-positive rate on clean traces (any effect added); per pair the rate at which both were
-found. Targets (issue 11) are printed beside the measured figures.
+found. Targets (issue 11) are printed beside the measured figures. For the load transfer and
+the friction change along the rail, what their candidates read against the truth whether added
+or not; for the friction change also what there was to see on each side of it (the generator's
+seconds past the friction curve's peak, ``independent.sliding_around``, and the loop's critical
+points at a slide).
 """
 
 from __future__ import annotations

@@ -184,8 +184,8 @@ Several effects may be combined; two of the same category multiply (factors, sca
 
 Public API: ``Scenario``, ``Effect``, ``random_scenario``, ``generate``, ``write_trace``,
 ``random_effect``, ``sliding_around`` (the truth a power study needs; see their docstrings).
-Everything random comes from the given
-``numpy.random.Generator`` or seed: the same seed gives identical output.
+Everything random comes from the given ``numpy.random.Generator`` or seed: the same seed gives
+identical output.
 """
 
 from __future__ import annotations
