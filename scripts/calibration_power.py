@@ -171,8 +171,8 @@ def _run_one(job: dict[str, Any]) -> dict[str, Any]:
             adhesion_fits[cat] = row["parameters"]
     true_pitch = _true_bogie_pitch(scenario, effects)
     step = next((e for e in effects if e.category == "adhesion_position"), None)
-    if step is not None:
-        adhesion_fits["evidence"] = _step_evidence(ind, scenario, effects, step, job["seed"], trace)
+    evidence = None if step is None else _step_evidence(ind, scenario, effects, step, job["seed"],
+                                                        trace)  # fmt: skip
     expected = {LOOP_CATEGORY.get(e.category, e.category) for e in effects}
     extra = [s["category"] for s in added if s["category"] not in expected]
     return {**job, "effects_found": rows, "added": [s["category"] for s in added],
@@ -180,6 +180,7 @@ def _run_one(job: dict[str, Any]) -> dict[str, Any]:
             "n_axles": scenario.n_axles, "speed_kmh": scenario.speed_kmh,
             "lead_in_s": scenario.lead_in_s, "contaminant": scenario.contaminant,
             "adhesion_fits": adhesion_fits, "true_bogie_pitch_kN_per_mps2": true_pitch,
+            "step_evidence": evidence,
             "effect_params": [e.params for e in effects]}  # fmt: skip
 
 
@@ -331,7 +332,7 @@ def _adhesion_readings(cat: str, rs: list[dict[str, Any]]) -> dict[str, Any]:
         "tried_rate": len(fits) / len(rs),
         "fitted_abs_error_median": float(np.median(err)) if err else math.nan,
     }
-    ev = [r["adhesion_fits"]["evidence"] for r in rs if "evidence" in r.get("adhesion_fits", {})]
+    ev = [r["step_evidence"] for r in rs if r.get("step_evidence")]
     if ev:  # a step: is there anything to see on both sides, in truth and for the loop
         out["past_peak_both_sides_rate"] = float(
             np.mean(

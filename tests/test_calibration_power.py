@@ -51,7 +51,7 @@ def test_the_power_study_says_what_a_friction_step_leaves_to_see(tmp_path):
     each side of it and the loop's critical points there, per trace and summarised."""
     data = _study(tmp_path, "adhesion_position", clean=0)
     for r in data["results"]:
-        ev = r["adhesion_fits"]["evidence"]
+        ev = r["step_evidence"]
         assert ev["past_peak_s_before"] >= 0.0 and ev["past_peak_s_after"] >= 0.0
         # both sides of one stop: no more than the stop lasted, and a sliding rail slides
         assert 1.0 < ev["past_peak_s_before"] + ev["past_peak_s_after"] < 200.0

@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from wsp_env.calibration.residuals import resistance_N
-from wsp_env.calibration.traces import Trace
+from wsp_env.calibration.traces import Trace, braked
 
 G = 9.80665
 
@@ -171,13 +171,12 @@ def negligible(category: str, params: dict[str, float], trace: Trace) -> str | N
 
 
 def stop_samples(trace: Trace) -> np.ndarray:
-    """The stop: from the brake application (the first sample with a cylinder 0.05 bar above
-    the brake's threshold) while the train runs above 10 km/h. A coasting lead-in is no part
-    of it: a force that acts with the brake would otherwise be judged smaller the longer the
-    logger ran before the driver braked."""
-    p_th = float(trace.vehicle.get("brake", {}).get("p_threshold_bar", 0.0))
-    braked = np.maximum.accumulate((trace.p_cyl_bar > p_th + 0.05).any(axis=1))
-    stop = braked & (trace.v_train_kmh > 10.0)
+    """The stop: from the brake application (the first sample with an axle ``braked``) while
+    the train runs above 10 km/h. A coasting lead-in is no part of it: a force that acts with
+    the brake would otherwise be judged smaller the longer the logger ran before the driver
+    braked."""
+    applied = np.maximum.accumulate(braked(trace).any(axis=1))
+    stop = applied & (trace.v_train_kmh > 10.0)
     return stop if stop.any() else trace.v_train_kmh > 10.0
 
 

@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from wsp_env.calibration.adhesion_estimate import censored_points, fit_base_law, pooled_points
-from wsp_env.calibration.traces import Trace
+from wsp_env.calibration.traces import Trace, braked
 
 MIN_SPEED_KMH = 10.0
 # a *measured* wheel speed below this reads as locked: above the speed sensors' noise
@@ -155,8 +155,6 @@ def adhesion_fit(trace: Trace) -> Channel:
 
 
 def coasting_creep(trace: Trace) -> Channel:
-    brake = trace.vehicle.get("brake", {})
-    p_th = float(brake.get("p_threshold_bar", 0.0))
     v = trace.v_train_kmh
     creep = 100.0 * (v[:, None] - trace.v_axle_kmh) / np.maximum(v[:, None], 1.0)
     # coasting = the train unbraked (every axle) since the start of the record (before the
@@ -165,7 +163,7 @@ def coasting_creep(trace: Trace) -> Channel:
     # for seconds), and the braking train's deceleration turns the ground speed's timing into
     # apparent creep (held-out clean independent traces on oil read 1-3 % there, which the
     # radius test took for worn leading wheels)
-    unbraked = (trace.p_cyl_bar < p_th + 0.05).all(axis=1)
+    unbraked = ~braked(trace).any(axis=1)
     coasting = np.zeros_like(unbraked)
     t = trace.time_s
     run_start = None

@@ -82,8 +82,23 @@ class Trace:
 
     def brake_torque_Nm(self) -> np.ndarray:
         """(T, n_axles) nominal brake torque ``gain_i (p_i - p_th)^+`` from the metadata."""
-        p_th = float(self.vehicle.get("brake", {}).get("p_threshold_bar", 0.0))
+        p_th = p_threshold_bar(self)
         return self.axle_torque_gains()[None, :] * np.maximum(0.0, self.p_cyl_bar - p_th)
+
+
+BRAKED_MARGIN_BAR = 0.05  # above the brake's threshold: a pressure sensor's offset is no brake
+
+
+def p_threshold_bar(trace: Any) -> float:
+    """The metadata's brake threshold (bar; 0 where it gives none)."""
+    return float(trace.vehicle.get("brake", {}).get("p_threshold_bar", 0.0))
+
+
+def braked(trace: Any) -> np.ndarray:
+    """(T, n_axles): the axle's cylinder at least ``BRAKED_MARGIN_BAR`` above the brake's
+    threshold. One definition for "the brake is on": the coasting channel (no axle braked)
+    and the stop a force is judged over (from the first braked sample) both use it."""
+    return trace.p_cyl_bar >= p_threshold_bar(trace) + BRAKED_MARGIN_BAR
 
 
 # vendor name -> (canonical name, factor) ; see docs/trace_format.md "Vendor channel names"
