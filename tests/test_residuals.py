@@ -3,6 +3,7 @@ on a trace without extra effects (DESIGN §7)."""
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from wsp_env.calibration.residuals import channels
@@ -55,3 +56,23 @@ def test_wheel_radius_shows_in_the_coasting_creep_only(rmse):
 def test_per_axle_adhesion_shows_in_the_adhesion_fit(rmse):
     assert rmse["adhesion_per_axle"]["adhesion_fit_kN"] > 1.2 * rmse["clean"]["adhesion_fit_kN"]
     assert rmse["adhesion_per_axle"]["coasting_creep_pct"] < 2 * rmse["clean"]["coasting_creep_pct"]
+
+
+def test_the_balance_anchor_is_known_to_the_noise_over_its_independent_values():
+    """``anchor_se_kmh``: the sensor's noise over the samples in the first ``ANCHOR_S`` of the
+    mask, or where the speed was interpolated between updates, over the updates there (plus
+    the one the first interpolated samples lean on)."""
+    import types
+
+    from wsp_env.calibration.residuals import ANCHOR_S, anchor_se_kmh
+
+    t = np.arange(0.0, 10.0, 0.1)
+    mask = t >= 2.0
+    trace = types.SimpleNamespace(time_s=t, ground_speed_noise_kmh=0.3, v_train_update_s=None)
+    n_window = int(np.sum(mask & (t <= 2.0 + ANCHOR_S + 1e-9)))
+    assert anchor_se_kmh(trace, mask) == pytest.approx(0.3 / np.sqrt(n_window))
+    trace.v_train_update_s = 0.5
+    assert anchor_se_kmh(trace, mask) == pytest.approx(
+        0.3 / np.sqrt(ANCHOR_S / 0.5 + 1.0), rel=0.05
+    )
+    assert anchor_se_kmh(trace, np.zeros_like(mask)) == 0.0

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from wsp_env.calibration.traces import TraceError, read_trace
+from wsp_env.calibration.traces import TraceError, _averaged_updates, read_trace
 from wsp_env.config import load_vehicle
 from wsp_env.policy import NoWSP
 from wsp_env.runner import run_one, trace_metadata
@@ -193,11 +193,19 @@ def test_missing_or_broken_metadata(trace_dir):
         read_trace(trace_dir / "empty.csv")
 
 
-def _logged_gps(mode: str, fix_period_s: float, log_period_s: float, seed: int):
+def _logged_gps(
+    mode: str,
+    fix_period_s: float,
+    log_period_s: float,
+    seed: int,
+    noise_kmh: float = 0.0,
+    jitter_s: float = 0.03,
+):
     """A GPS-like ground speed on a train decelerating at 1 m/s^2 (the truth, km/h), fixed
-    every ``fix_period_s`` and logged every ``log_period_s`` (+-30 ms clock jitter) by a logger
-    that holds the last value or averages over its period — built here on a 1 ms grid, apart
-    from every simulator in the project."""
+    every ``fix_period_s`` (each fix off by Gaussian ``noise_kmh``) and logged every
+    ``log_period_s`` (+-``jitter_s`` clock jitter) by a logger that holds the last value or
+    averages over its period — built here on a 1 ms grid, apart from every simulator in the
+    project."""
     rng = np.random.default_rng(seed)
 
     def truth(t):
@@ -205,9 +213,10 @@ def _logged_gps(mode: str, fix_period_s: float, log_period_s: float, seed: int):
 
     fine = np.arange(0.0, 30.0, 0.001)
     fix_t = np.arange(rng.uniform(0.0, fix_period_s), 30.0, fix_period_s)
-    held = truth(fix_t)[np.clip(np.searchsorted(fix_t, fine, side="right") - 1, 0, None)]
+    fixes = truth(fix_t) + rng.normal(0.0, noise_kmh, fix_t.size) * (truth(fix_t) > 0)
+    held = fixes[np.clip(np.searchsorted(fix_t, fine, side="right") - 1, 0, None)]
     t_log = np.arange(1, int(29.0 / log_period_s)) * log_period_s
-    t_log = t_log + rng.uniform(-0.03, 0.03, t_log.size)
+    t_log = t_log + rng.uniform(-jitter_s, jitter_s, t_log.size)
     k = np.round(t_log / 0.001).astype(int)
     if mode == "hold":
         v = held[k]
@@ -239,7 +248,7 @@ def test_a_held_or_averaged_gps_is_put_back_on_time(mode, fix_period_s, log_peri
     for seed in range(6):
         t, v, truth = _logged_gps(mode, fix_period_s, log_period_s, seed)
         notes: list[str] = []
-        out, _ = _unhold(v, t, notes)
+        out, _, _ = _unhold(v, t, notes)
         assert notes and ("averaged" in notes[0]) == (mode == "mean")
         moving = (t > 2.0) & (out > 5.0)
         err = [np.mean((out[moving] - truth(t[moving] - lag)) ** 2) for lag in lags]
@@ -248,3 +257,51 @@ def test_a_held_or_averaged_gps_is_put_back_on_time(mode, fix_period_s, log_peri
         assert abs(found[-1]) < (0.02 if mode == "mean" else 0.5 * log_period_s), seed
         assert lags[int(np.argmin(raw))] > 0.3 * fix_period_s  # there was a lag to take out
     assert abs(np.mean(found)) < 0.02
+
+
+@pytest.mark.parametrize(("fix_period_s", "log_period_s"), [(0.2, 0.1), (0.125, 0.05)])
+def test_an_averaged_gps_without_repeats_is_told_by_its_update_interval(fix_period_s, log_period_s):
+    """A 5 Hz fix averaged at 10 Hz (8 Hz at 20 Hz) shows no repeated samples, only blends,
+    and trails the truth by half a fix period and half a log period. The reader finds the
+    update interval on each of six draws of phase, noise (0.1 km/h per fix) and +-2 ms clock
+    jitter (the held and averaged model leaves well under half of what a smooth curve with as
+    many parameters leaves) and says how much of the column's lag is the logger's: half an
+    update beyond the log period's own half, which the pressures share — the column lags the
+    truth by that sum within 30 ms."""
+    lags = np.arange(-0.3, 0.6, 0.001)
+    for seed in range(6):
+        t, v, truth = _logged_gps("mean", fix_period_s, log_period_s, seed, 0.1, 0.002)
+        notes: list[str] = []
+        assert _averaged_updates(v, t, notes) == pytest.approx(fix_period_s), seed
+        assert notes and "averaged" in notes[0]
+        moving = (t > 2.0) & (v > 5.0)
+        raw = [np.mean((v[moving] - truth(t[moving] - lag)) ** 2) for lag in lags]
+        found = lags[int(np.argmin(raw))]
+        assert abs(found - 0.5 * (fix_period_s + log_period_s)) < 0.03, seed
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_a_speed_updated_every_sample_is_no_averaged_update(seed):
+    """A 10 Hz fix averaged at 10 Hz, and a smooth speed with independent noise on every
+    sample, are no held signal: the reader finds no update interval and notes nothing."""
+    t, v, _ = _logged_gps("mean", 0.1, 0.1, seed, 0.1, 0.002)
+    assert _averaged_updates(v, t, []) is None
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, 30.0, 0.1)
+    v = np.round(120.0 - 3.6 * t + 0.02 * t**2 + rng.normal(0.0, 0.1, t.size), 2)
+    notes: list[str] = []
+    assert _averaged_updates(v, t, notes) is None and not notes
+
+
+def test_a_ground_speed_lag_is_judged_beyond_the_loggers_part(trace_dir):
+    """A lag the column shows is reported only beyond what the reader put down to the logger's
+    averaging of held updates: 0.2 s with 0.1 s of it the logger's is inside the logging's
+    0.15 s resolution, 0.3 s is not."""
+    from wsp_env.calibration.plausibility import negligible
+
+    trace = read_trace(trace_dir / "good.csv")
+    assert negligible("sensor", {"speed_lag_s": 0.2}, trace) is None
+    trace.v_train_logger_lag_s, trace.v_train_update_s = 0.1, 0.2
+    why = negligible("sensor", {"speed_lag_s": 0.2}, trace)
+    assert why and "0.10 s of it the logger's" in why and "0.2 s updates" in why
+    assert negligible("sensor", {"speed_lag_s": 0.3}, trace) is None

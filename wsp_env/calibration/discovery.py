@@ -101,6 +101,7 @@ from wsp_env.calibration.plausibility import (
 )
 from wsp_env.calibration.residuals import (
     MIN_SPEED_KMH,
+    anchor_se_kmh,
     anchored,
     balance_intervals,
     balance_mask,
@@ -395,15 +396,32 @@ def _speed_lag_signature(predicted_drop: np.ndarray, t: np.ndarray, tau: float) 
     return predicted_drop - np.interp(t - tau, t, predicted_drop, left=predicted_drop[0])
 
 
+# how far (standard errors, ``anchor_se_kmh``) the balance's starting speed may be off when a
+# ground-speed lag is fitted
+ANCHOR_Z = 2.0
+
+
 def _fit_sensor_lag(trace, residual, mask):
     """Ground speed logged ``tau`` late: a grid over the lag (``_speed_lag_signature``) on the
-    drop the current model predicts (the residual plus the logged drop)."""
+    drop the current model predicts (the residual plus the logged drop).
+
+    On a stop that starts braking soon after the record does, a lag's signature (``tau a``
+    from the brake application on) is much like the whole balance shifted by an error in its
+    starting speed — a 1-2 Hz GPS on a 1-2 s lead-in leaves one or a few fixes to anchor on.
+    So the lag is chosen with such a shift fitted alongside, bounded by ``ANCHOR_Z`` standard
+    errors of the anchor (``anchor_se_kmh``); the residual returned is the lag's alone."""
     t = trace.time_s
     predicted = residual - masked_cumdiff(trace.v_train_kmh, balance_intervals(trace))
-    best = (float(np.sum(residual[mask] ** 2)), 0.0, residual)
+    bound = ANCHOR_Z * anchor_se_kmh(trace, mask)
+
+    def rss_shifted(res: np.ndarray) -> float:
+        shift = float(np.clip(res[mask].mean(), -bound, bound))
+        return float(np.sum((res[mask] - shift) ** 2))
+
+    best = (rss_shifted(residual), 0.0, residual)
     for tau in SPEED_LAG_GRID_S:
         res = residual - anchored(_speed_lag_signature(predicted, t, float(tau)), t, mask)
-        rss = float(np.sum(res[mask] ** 2))
+        rss = rss_shifted(res)
         if rss < best[0]:
             best = (rss, float(tau), res)
     if best[1] <= 0.0:  # a lag cannot lead

@@ -131,7 +131,8 @@ def negligible(category: str, params: dict[str, float], trace: Trace) -> str | N
     """The reason a fitted effect is too small to act on, or ``None``: a ground-speed scale
     inside a sensor's calibration tolerance, a lag inside the logging's timing resolution, pads
     inside their stop-to-stop variation (``PAD_SCALE_MIN``), a running resistance inside its
-    formula's accuracy (``RESISTANCE_REL_MIN``).
+    formula's accuracy (``RESISTANCE_REL_MIN``). A ground-speed lag is judged beyond the part
+    the reader puts down to the logger (``Trace.v_train_logger_lag_s``).
     Such effects are statistically real on long clean records (the logger's own sampling,
     averaging and fix timing produce them) and physically nothing. Every force effect is
     judged by the force it adds (``implied_force_N``, RMS over the stop, ``stop_samples``) against
@@ -164,9 +165,21 @@ def negligible(category: str, params: dict[str, float], trace: Trace) -> str | N
             f"ground-speed scale {100 * params['speed_scale_error']:+.2f} %: inside a sensor's "
             f"{100 * SPEED_SCALE_MIN:g} % calibration tolerance"
         )
-    for key, what in (("speed_lag_s", "ground-speed lag"), ("lag_s", "pressure lag")):
-        if key in params and abs(params[key]) < LAG_MIN_S:
-            return f"{what} {params[key]:.3f} s: inside the logging's {LAG_MIN_S:g} s resolution"
+    logger = trace.v_train_logger_lag_s
+    if "speed_lag_s" in params and abs(params["speed_lag_s"]) - logger < LAG_MIN_S:
+        of_it = (
+            f", {logger:.2f} s of it the logger's averaging of {trace.v_train_update_s:g} s updates"
+            if logger
+            else ""
+        )
+        return (
+            f"ground-speed lag {params['speed_lag_s']:.3f} s{of_it}: inside the logging's "
+            f"{LAG_MIN_S:g} s resolution"
+        )
+    if "lag_s" in params and abs(params["lag_s"]) < LAG_MIN_S:
+        return (
+            f"pressure lag {params['lag_s']:.3f} s: inside the logging's {LAG_MIN_S:g} s resolution"
+        )
     return None
 
 

@@ -102,6 +102,25 @@ def anchored(y: np.ndarray, t: np.ndarray, mask: np.ndarray) -> np.ndarray:
     return y - float(y[first].mean())
 
 
+def anchor_se_kmh(trace: Trace, mask: np.ndarray) -> float:
+    """The standard error (km/h) of the balance's starting speed (``anchored``): the ground
+    speed's noise over the independent values in the first ``ANCHOR_S`` of ``mask`` — every
+    sample, or where the reader found the speed held or averaged between updates, the updates
+    there (``Trace.v_train_update_s``; the interpolated samples between two updates carry
+    both, so one more than the window holds). A 1 Hz GPS fix on a 1 s lead-in leaves the
+    whole stop's balance offset by about one fix's noise."""
+    if not mask.any():
+        return 0.0
+    t = trace.time_s
+    first = mask & (t <= t[mask][0] + ANCHOR_S)
+    update = trace.v_train_update_s
+    if update:
+        n_independent = float(np.ptp(t[first])) / update + 1.0
+    else:
+        n_independent = float(first.sum())
+    return trace.ground_speed_noise_kmh / float(np.sqrt(max(n_independent, 1.0)))
+
+
 def train_speed_balance(trace: Trace) -> Channel:
     veh = trace.vehicle
     mass = float(veh["mass_kg"])

@@ -24,6 +24,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import scipy.sparse as sparse
+from scipy.sparse.linalg import spsolve
 
 from wsp_env.trace_io import CONTAMINANTS, FORMAT
 
@@ -52,10 +54,17 @@ class Trace:
     # the ground-speed sensor's noise (km/h) where the reader measured it on held updates;
     # None: measure it on the samples (``ground_speed_noise_kmh``)
     v_train_noise_kmh: float | None = None
+    # the interval (s) between the ground speed's updates where the reader found them held or
+    # averaged (``_unhold``, ``_averaged_updates``); None: every sample is an update
+    v_train_update_s: float | None = None
+    # how far (s) the column as read trails the train by its logging alone: half an update
+    # interval where updates were averaged over the log period and left as logged
+    # (``_averaged_updates``), else 0 (held updates are put back on time by ``_unhold``)
+    v_train_logger_lag_s: float = 0.0
 
     @property
     def ground_speed_noise_kmh(self) -> float:
-        """The ground speed's sample noise (km/h): on its updates where it was held (an
+        """The ground-speed sensor's noise (km/h): on its updates where it was held (an
         interpolated record has no sample noise left to see), else on the samples."""
         if self.v_train_noise_kmh is not None:
             return self.v_train_noise_kmh
@@ -314,13 +323,20 @@ def read_trace(csv_path: str | Path) -> Trace:
             else:
                 cols[name] = _fill_gaps(path, name, cols[name], t, notes)
     _check_units(path, meta, cols, n)
-    cols["v_train_kmh"], v_noise = _unhold(cols["v_train_kmh"], t, notes, gap_filled)
+    cols["v_train_kmh"], v_noise, v_update = _unhold(cols["v_train_kmh"], t, notes, gap_filled)
+    v_logger_lag = 0.0
+    if v_update is None:
+        v_update = _averaged_updates(cols["v_train_kmh"], t, notes, gap_filled)
+        v_logger_lag = 0.5 * v_update if v_update else 0.0
     v_axle = np.stack([cols[f"v_axle_{i}_kmh"] for i in range(1, n + 1)], axis=1)
     p_cyl = np.stack([cols[f"p_cyl_{i}_bar"] for i in range(1, n + 1)], axis=1)
     optional = {k: cols[k] for k in _OPTIONAL if k in cols}
     known = set(required) | set(optional)
     extra = {k: v for k, v in cols.items() if k not in known}
-    return Trace(path, meta, t, cols["v_train_kmh"], v_axle, p_cyl, optional, extra, notes, v_noise)
+    return Trace(
+        path, meta, t, cols["v_train_kmh"], v_axle, p_cyl, optional, extra, notes, v_noise,
+        v_update, v_logger_lag,
+    )  # fmt: skip
 
 
 HELD_FRACTION = 0.3  # of the moving samples repeating the previous value exactly
@@ -333,7 +349,7 @@ BLEND_SINGLES_FRACTION = 0.3
 
 def _unhold(
     v: np.ndarray, t: np.ndarray, notes: list[str], filled: np.ndarray | None = None
-) -> tuple[np.ndarray, float | None]:
+) -> tuple[np.ndarray, float | None, float | None]:
     """A ground speed held between updates (a GPS fix every 0.1-1 s, logged faster, or held
     through a dropout) lags the true speed by up to an update interval and has no sample noise
     to measure. Where more than ``HELD_FRACTION`` of the moving samples repeat the previous
@@ -347,11 +363,12 @@ def _unhold(
     blend is dropped and its value places the change inside its averaging window — a blend
     ``w v_prev + (1 - w) v_next`` says the previous fix filled the first ``w`` of the window.
     Samples the reader interpolated across a gap (``filled``) are no update either.
-    Returns the speed and the noise measured on the updates (None where nothing was held)."""
+    Returns the speed, the noise measured on the updates and the median interval between
+    updates (both None where nothing was held)."""
     moving = v > 1.0
     repeats = np.concatenate([[False], np.diff(v) == 0.0])
     if moving.sum() < 10 or repeats[moving].mean() <= HELD_FRACTION:
-        return v, None
+        return v, None, None
     period = float(np.median(np.diff(t)))
     change = np.flatnonzero(np.diff(v) != 0.0) + 1  # first sample of every run
     starts = np.concatenate([[0], change])
@@ -388,7 +405,114 @@ def _unhold(
         f"{100 * repeats[moving].mean():.0f} % of moving samples repeated): interpolated "
         "between the updates"
     )
-    return out, noise
+    return out, noise, (interval if math.isfinite(interval) else None)
+
+
+# GPS update intervals (s) a logger may average without showing repeats (1.5-3.5 log periods:
+# shorter ones are the log's own rate, longer ones leave held samples for ``_unhold``)
+GPS_INTERVALS_S = (0.1, 0.125, 0.2, 0.25, 0.5)
+# the held-and-averaged model must leave at most this fraction of what a smooth curve with as
+# many parameters leaves (measured on the independent generator: 5 Hz fixes averaged at 10 Hz
+# 0.09-0.34, 10 Hz fixes 1.04-1.44)
+HELD_MODEL_RATIO = 0.5
+HELD_MODEL_PHASES = 20
+
+
+def _levels_design(t: np.ndarray, period: float, knots: np.ndarray) -> sparse.csr_matrix:
+    """Rows: each sample as the mean over its log period ``[t - period, t]`` of a signal held
+    between ``knots`` (one column per level); at most two levels per row (knot spacing >= 1.5
+    periods)."""
+    lo = t - period
+    m = knots.size - 1
+    j0 = np.clip(np.searchsorted(knots, lo, side="right") - 1, 0, m - 1)
+    j1 = np.clip(np.searchsorted(knots, t, side="right") - 1, 0, m - 1)
+    first = (np.minimum(t, knots[j0 + 1]) - lo) / period
+    rows = np.arange(t.size)
+    second = j1 > j0
+    data = np.concatenate([np.where(second, first, 1.0), 1.0 - first[second]])
+    return sparse.csr_matrix(
+        (data, (np.concatenate([rows, rows[second]]), np.concatenate([j0, j1[second]]))),
+        shape=(t.size, m),
+    )
+
+
+def _ls_rss(design: sparse.csr_matrix, v: np.ndarray) -> tuple[float, np.ndarray]:
+    """Least squares of ``v`` on the used columns of ``design``: (residual sum, coefficients;
+    NaN for unused columns)."""
+    used = np.asarray(np.abs(design).sum(axis=0)).ravel() > 1e-9
+    a = design[:, used].tocsc()
+    ata = (a.T @ a).tocsc() + sparse.identity(int(used.sum()), format="csc") * 1e-9
+    coef = np.full(design.shape[1], np.nan)
+    coef[used] = spsolve(ata, a.T @ v)
+    e = a @ coef[used] - v
+    return float(e @ e), coef
+
+
+def _averaged_updates(
+    v: np.ndarray, t: np.ndarray, notes: list[str], filled: np.ndarray | None = None
+) -> float | None:
+    """The update interval of a GPS speed updated every ``P`` (a few log periods,
+    ``GPS_INTERVALS_S``) and averaged over each log period, or None. Such a column repeats
+    no sample for ``_unhold`` to find (a 5 Hz fix logged at 10 Hz: a blend of two fixes, then
+    the new fix alone), yet it trails the train by half an update more than the other
+    averaged columns (the pressures): ~0.1 s, a ground-speed lag in every trace that is the
+    logger's, not the sensor's.
+
+    Each sample is modelled as the mean over its log period of a level held from one update
+    to the next (updates every ``P``, at a phase on a grid of ``HELD_MODEL_PHASES``), the
+    levels by least squares. Where the best such model leaves under ``HELD_MODEL_RATIO`` of
+    what a piecewise-linear curve with a knot every ``P`` leaves (as many parameters, no
+    holding; the median over four placements of its knots), the column is taken as held and
+    averaged (noted). The column itself is left as logged: its noise, measured on the
+    samples, is what the calibration has always judged such a column by. Samples the reader
+    filled across a gap are left out of the fit."""
+    fit = np.ones(v.size, dtype=bool) if filled is None else ~filled
+    if (fit & (v > 1.0)).sum() < 50:
+        return None
+    period = float(np.median(np.diff(t)))
+    tf, vf = t[fit], v[fit]
+    best: tuple[float, float] | None = None
+    for interval in GPS_INTERVALS_S:
+        if not 1.5 * period <= interval <= 3.5 * period:
+            continue
+        held = min(
+            _ls_rss(
+                _levels_design(
+                    tf, period, np.arange(t[0] - period - interval + phase, t[-1] + interval,
+                                          interval)
+                ),
+                vf,
+            )[0]
+            for phase in np.arange(HELD_MODEL_PHASES) * interval / HELD_MODEL_PHASES
+        )  # fmt: skip
+        smooth = float(np.median([
+            _ls_rss(_hat_design(tf, np.arange(t[0] - interval, t[-1] + 2 * interval, interval)
+                                + shift), vf)[0]
+            for shift in np.arange(4) * interval / 4
+        ]))  # fmt: skip
+        ratio = held / max(smooth, 1e-12)
+        if ratio < HELD_MODEL_RATIO and (best is None or ratio < best[0]):
+            best = (ratio, interval)
+    if best is None:
+        return None
+    notes.append(
+        f"column 'v_train_kmh': updates every {best[1]:g} s averaged over the {period:g} s log "
+        f"period (a held model leaves {100 * best[0]:.0f} % of a smooth curve's residual): "
+        f"it trails the train by ~{0.5 * best[1]:g} s more than the other columns, counted as "
+        "the logger's timing"
+    )
+    return float(best[1])
+
+
+def _hat_design(t: np.ndarray, knots: np.ndarray) -> sparse.csr_matrix:
+    """Piecewise-linear interpolation between ``knots`` (one column per knot)."""
+    j = np.clip(np.searchsorted(knots, t, side="right") - 1, 0, knots.size - 2)
+    w = (t - knots[j]) / (knots[j + 1] - knots[j])
+    rows = np.arange(t.size)
+    return sparse.csr_matrix(
+        (np.concatenate([1.0 - w, w]), (np.concatenate([rows, rows]), np.concatenate([j, j + 1]))),
+        shape=(t.size, knots.size),
+    )
 
 
 def _check_units(path: Path, meta: dict, cols: dict[str, np.ndarray], n: int) -> None:
