@@ -360,3 +360,17 @@ def test_a_sparse_gps_on_a_short_lead_in_is_no_ground_speed_lag(tmp_path, seed):
     assert trace.v_train_update_s is not None and trace.v_train_update_s >= 0.5
     result = discover(trace)
     assert [s.category for s in result.added] == []
+
+
+def test_the_calibrate_command_says_what_the_reader_made_of_the_ground_speed(tmp_path, capsys):
+    """``wsp-env calibrate`` prints the reader's notes: on clean seed 23000095 that its GPS is
+    updated every 0.2 s and averaged, and that half an update is the logger's timing."""
+    from wsp_env.cli import main
+
+    rng = np.random.default_rng(23000095)
+    columns, meta = ind.generate(ind.random_scenario(rng), [], seed=23000095)
+    csv_path, _ = ind.write_trace(tmp_path / "gps", columns, meta)
+    assert main(["calibrate", str(csv_path)]) == 0
+    out = capsys.readouterr().out
+    assert "read: column 'v_train_kmh': updates every 0.2 s averaged" in out
+    assert "nothing to add" in out

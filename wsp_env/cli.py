@@ -334,6 +334,8 @@ def cmd_calibrate(args: argparse.Namespace) -> dict[str, Any]:
 
 def _print_calibrate(result: dict[str, Any]) -> None:
     print(f"calibration of {result['trace']}:")
+    for note in result.get("notes", []):
+        print(f"  read: {note}")
     for key, before in result["errors_before"].items():
         print(f"  {key:26s} {before:8.3f} -> {result['errors_after'][key]:8.3f}")
     if not result["added_effects"]:
