@@ -31,6 +31,7 @@ points at a slide).
 from __future__ import annotations
 
 import argparse
+import collections
 import json
 import math
 import os
@@ -156,7 +157,15 @@ def _run_one(job: dict[str, Any]) -> dict[str, Any]:
         # not chosen, but named among the chosen effect's equally good alternatives: the trace
         # could not tell them apart (reported beside the detection rate, never counted in it)
         named = any(want in alt.split("+") for s in added for alt in s["alternatives"])
+        # a choice made inside the tie margin: the effect found while another explains as
+        # well, or another chosen while this one does (the categories it tied with)
+        if hits:
+            tied = {c for alt in hits[0]["alternatives"] for c in alt.split("+")} - {want}
+        else:
+            tied = {s["category"] for s in added
+                    if any(want in alt.split("+") for alt in s["alternatives"])}  # fmt: skip
         row = {"category": eff.category, "found": bool(hits), "named": bool(hits) or named,
+               "tied_with": sorted(tied),
                "true": math.nan, "value": math.nan, "cut": math.nan}  # fmt: skip
         if hits:
             true, value = _true_and_found(eff, hits[0], meta)
@@ -287,6 +296,11 @@ def summarise(results: list[dict[str, Any]]) -> dict[str, Any]:
                 "n": len(rs),
                 "detection_rate": len(found) / len(rs),
                 "found_or_named_rate": float(np.mean([e.get("named", e["found"]) for e in eff])),
+                "tied_rate": float(np.mean([bool(e.get("tied_with")) for e in eff])),
+                "tied_won_rate": float(np.mean([bool(e.get("tied_with")) and e["found"]
+                                                for e in eff])),
+                "tied_with": dict(collections.Counter(c for e in eff
+                                                      for c in e.get("tied_with", []))),
                 "param_rel_error_median": float(np.median(rel)) if rel else math.nan,
                 "cut_median": float(np.median([e["cut"] for e in found])) if found else math.nan,
                 "extra_effect_rate": float(np.mean([bool(r["extra"]) for r in rs])),
@@ -393,6 +407,14 @@ def print_table(summary: dict[str, Any]) -> None:
                       f"km/h) on both sides "
                       f"{100 * row['points_both_sides_rate']:.0f} % (median before the "
                       f"change {row['points_before_median']:.0f})")  # fmt: skip
+        for row in info["rows"]:
+            if row["magnitude"] == info["target_magnitude"] and row.get("tied_rate"):
+                rivals = ", ".join(
+                    f"{c} {n}" for c, n in sorted(row["tied_with"].items(), key=lambda kv: -kv[1])
+                )
+                print(f"{'':24s} {row['magnitude']:10.4g}: decided inside the tie margin on "
+                      f"{100 * row['tied_rate']:.0f} % (won {100 * row['tied_won_rate']:.0f} "
+                      f"%; tied with: {rivals})")  # fmt: skip
         print(f"{'':24s} smallest detected >= 90 %: {info['smallest_90pct']}")
     for p in summary["pairs"]:
         print(f"pair {p['effects']}: both found {100 * p['both_found_rate']:.0f} % "

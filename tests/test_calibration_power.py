@@ -59,3 +59,18 @@ def test_the_power_study_says_what_a_friction_step_leaves_to_see(tmp_path):
     for row in data["summary"]["categories"]["adhesion_position"]["rows"]:
         assert 0.0 <= row["past_peak_both_sides_rate"] <= 1.0
         assert 0.0 <= row["points_both_sides_rate"] <= 1.0
+
+
+def test_the_power_study_says_which_choices_were_ties(tmp_path):
+    """Pads and a brake force that follows the demand are one regressor where the WSP seldom
+    vents: the study says how often the loop chose inside the tie margin and with what. Its
+    first 3 kN trace (seed 41000, soap, 4 axles) is such a tie, lost to the pads."""
+    summary = _study(tmp_path, "unmeasured_brake_force", 0)["summary"]
+    row = next(
+        r
+        for r in summary["categories"]["unmeasured_brake_force"]["rows"]
+        if r["magnitude"] == 3000.0
+    )
+    assert row["n"] == 1 and row["detection_rate"] == 0.0
+    assert row["tied_rate"] == 1.0 and row["tied_won_rate"] == 0.0
+    assert row["tied_with"].get("pad_friction") == 1
