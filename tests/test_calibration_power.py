@@ -74,3 +74,53 @@ def test_the_power_study_says_which_choices_were_ties(tmp_path):
     assert row["n"] == 1 and row["detection_rate"] == 0.0
     assert row["tied_rate"] == 1.0 and row["tied_won_rate"] == 0.0
     assert row["tied_with"].get("pad_friction") == 1
+
+
+def _null_script():
+    sys.path.insert(0, str(SCRIPTS))
+    try:
+        import friction_step_null as fsn
+    finally:
+        sys.path.remove(str(SCRIPTS))
+    return fsn
+
+
+def test_a_simple_step_reading_finds_a_friction_change_on_a_power_study_trace():
+    """``friction_step_null.step_reading`` on power-study trace 101011 (soap, 4 axles, the rail
+    x1.3 from 133 m after the brake application): a step up by more than 20 % at |z| > 3,
+    within 60 m of the change (placed from the record's start: the coasting lead-in added)."""
+    from scipy.integrate import cumulative_trapezoid
+
+    from wsp_env.calibration import independent as ind
+
+    fsn = _null_script()
+    seed = 101011
+    row = fsn._one({"kind": "step", "effects": [("adhesion_position", 0.3)], "seed": seed})
+    reading = row["reading"]
+    assert row["true_factor"] == 1.3 and reading is not None
+    assert reading["factor"] > 1.2 and reading["z"] > 3.0
+    rng = np.random.default_rng(seed)
+    scenario = ind.random_scenario(rng, contaminant=row["rail"])
+    effect = fsn.cp._effect(ind, "adhesion_position", 0.3, rng, scenario)
+    columns, _ = ind.generate(scenario, [effect], seed=seed)
+    t, v = columns["time_s"], np.nan_to_num(columns["v_train_kmh"])
+    x_brake = float(np.interp(scenario.lead_in_s, t, cumulative_trapezoid(v / 3.6, t, initial=0)))
+    assert abs(reading["position_m"] - (x_brake + effect.params["position_m"])) < 60.0
+
+
+def test_the_best_threshold_search_keeps_the_clean_traces_false_positives():
+    """``best_detection``: thresholds that let at most the allowed share of clean readings
+    through; a step read with the wrong sign never counts."""
+    fsn = _null_script()
+
+    def rows(factors, zs, truth=None):
+        return [{"reading": {"factor": f, "z": z}, "true_factor": truth}
+                for f, z in zip(factors, zs, strict=True)]  # fmt: skip
+
+    clean = rows([1.1] * 49 + [1.6], [2.0] * 49 + [9.0])
+    steps = rows([1.5, 1.45, 0.7, 1.2], [8.0, 7.0, -6.0, 1.0], truth=1.3)
+    best = fsn.best_detection(clean, steps, 0.02)
+    # the one large clean reading may pass (1 of 50): every step read up counts, 0.7 never
+    assert best["false_positive"] <= 0.02 and best["detection"] == 0.75
+    # none may pass: over 1.6 or z 9 nothing of the steps is left
+    assert fsn.best_detection(clean, steps, 0.0)["detection"] == 0.0
