@@ -44,6 +44,27 @@ def test_the_power_study_reports_the_adhesion_readings(tmp_path):
         for fitted in r["adhesion_fits"].values():
             assert all(np.isfinite(v) for v in fitted.values())
     assert 0.0 <= summary["clean"]["false_positive_rate"] <= 1.0
+    assert all(0.0 <= r["pitch_threshold"]["detection"] <= 1.0 for r in rows)
+
+
+def test_a_threshold_on_the_fitted_pitch_keeps_the_clean_traces_false_positives():
+    """``pitch_threshold``: the lowest threshold at most 2 % of the clean traces reach (a clean
+    trace without a fit reaches none) and the share of effect traces over it."""
+    sys.path.insert(0, str(SCRIPTS))
+    try:
+        import calibration_power as cp
+    finally:
+        sys.path.remove(str(SCRIPTS))
+
+    def rows(pitches):
+        return [{"adhesion_fits": {} if p is None else {"load_transfer": {
+            "bogie_pitch_kN_per_mps2": p}}} for p in pitches]  # fmt: skip
+
+    clean = rows([float(k % 10) for k in range(49)] + [30.0])  # one clean trace reads 30
+    effect = rows([5.0, 12.0, 31.0, None])
+    best = cp.pitch_threshold(clean, effect)
+    assert best == {"detection": 0.5, "threshold": 12.0}  # 12 and 31; 30 is the 2 % let in
+    assert cp.pitch_threshold(clean + rows([29.0]), effect)["detection"] == 0.25
 
 
 def test_the_power_study_says_what_a_friction_step_leaves_to_see(tmp_path):
