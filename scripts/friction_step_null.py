@@ -35,6 +35,8 @@ from typing import Any
 
 import numpy as np
 
+from wsp_env.calibration.traces import Trace
+
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import calibration_power as cp
 
@@ -44,7 +46,7 @@ MIN_POINTS = 12
 CLEAN_SEED_OFFSET = 900_000  # clean sliding-rail traces: seed * 1e6 + this + k
 
 
-def step_reading(trace: Any) -> dict[str, float] | None:
+def step_reading(trace: Trace) -> dict[str, float] | None:
     """The best step in ``log mu`` at the trace's slide points (module docstring), or None
     where there are fewer than ``MIN_POINTS`` or no position leaves ``MIN_SIDE`` a side."""
     from wsp_env.calibration.adhesion_estimate import pooled_points

@@ -60,7 +60,7 @@ def test_per_axle_adhesion_shows_in_the_adhesion_fit(rmse):
 
 def test_the_balance_anchor_is_known_to_the_noise_over_its_independent_values():
     """``anchor_se_kmh``: the sensor's noise over the samples in the first ``ANCHOR_S`` of the
-    mask, or where the speed was interpolated between updates, over the updates there (plus
+    mask, or where the reader found updates, one update's noise over the updates there (plus
     the one the first interpolated samples lean on)."""
     import types
 
@@ -68,11 +68,12 @@ def test_the_balance_anchor_is_known_to_the_noise_over_its_independent_values():
 
     t = np.arange(0.0, 10.0, 0.1)
     mask = t >= 2.0
-    trace = types.SimpleNamespace(time_s=t, ground_speed_noise_kmh=0.3, v_train_update_s=None)
-    n_window = int(np.sum(mask & (t <= 2.0 + ANCHOR_S + 1e-9)))
-    assert anchor_se_kmh(trace, mask) == pytest.approx(0.3 / np.sqrt(n_window))
-    trace.v_train_update_s = 0.5
-    assert anchor_se_kmh(trace, mask) == pytest.approx(
-        0.3 / np.sqrt(ANCHOR_S / 0.5 + 1.0), rel=0.05
+    trace = types.SimpleNamespace(
+        time_s=t, ground_speed_noise_kmh=0.1, v_train_update_s=None, v_train_update_noise_kmh=None
     )
+    n_window = int(np.sum(mask & (t <= 2.0 + ANCHOR_S + 1e-9)))
+    assert anchor_se_kmh(trace, mask) == pytest.approx(0.1 / np.sqrt(n_window))
+    trace.v_train_update_s, trace.v_train_update_noise_kmh = 0.5, 0.3
+    expected = 0.3 / np.sqrt(ANCHOR_S / 0.5 + 1.0)
+    assert anchor_se_kmh(trace, mask) == pytest.approx(expected, rel=0.05)
     assert anchor_se_kmh(trace, np.zeros_like(mask)) == 0.0

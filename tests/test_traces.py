@@ -272,12 +272,14 @@ def test_an_averaged_gps_without_repeats_is_told_by_its_update_interval(fix_peri
     for seed in range(6):
         t, v, truth = _logged_gps("mean", fix_period_s, log_period_s, seed, 0.1, 0.002)
         notes: list[str] = []
-        assert _averaged_updates(v, t, notes) == pytest.approx(fix_period_s), seed
+        found = _averaged_updates(v, t, notes)
+        assert found is not None and found[0] == pytest.approx(fix_period_s), seed
+        assert found[1] == pytest.approx(0.1, rel=0.35), seed  # one update's noise
         assert notes and "averaged" in notes[0]
         moving = (t > 2.0) & (v > 5.0)
         raw = [np.mean((v[moving] - truth(t[moving] - lag)) ** 2) for lag in lags]
-        found = lags[int(np.argmin(raw))]
-        assert abs(found - 0.5 * (fix_period_s + log_period_s)) < 0.03, seed
+        lag_found = lags[int(np.argmin(raw))]  # the premise: the lag the reader puts down
+        assert abs(lag_found - 0.5 * (fix_period_s + log_period_s)) < 0.03, seed
 
 
 @pytest.mark.parametrize("seed", range(3))
@@ -305,3 +307,25 @@ def test_a_ground_speed_lag_is_judged_beyond_the_loggers_part(trace_dir):
     why = negligible("sensor", {"speed_lag_s": 0.2}, trace)
     assert why and "0.10 s of it the logger's" in why and "0.2 s updates" in why
     assert negligible("sensor", {"speed_lag_s": 0.3}, trace) is None
+
+
+def test_a_constant_or_held_speed_is_no_averaged_update(trace_dir):
+    """A record whose ground speed never changes (a single held value: no interval to time)
+    and a held GPS read from a file get no averaged-update interval and no logger lag: the
+    first is too little to tell, the second is put back on time between its updates."""
+    notes: list[str] = []
+    t = np.arange(0.0, 20.0, 0.1)
+    v = np.full(t.size, 80.0)
+    assert _averaged_updates(v, t, notes) is None and not notes
+    from wsp_env.calibration.traces import _unhold
+
+    _, noise, interval = _unhold(v, t, notes)
+    assert noise is None and interval is not None and not np.isfinite(interval)
+    header, rows, meta = _load(trace_dir)
+    col = header.index("v_train_kmh")
+    for k, row in enumerate(rows):  # a 1 Hz fix held at 10 Hz
+        row[col] = rows[k - k % 10][col]
+    trace = read_trace(_write(trace_dir, "held_1hz", header, rows, meta))
+    assert trace.v_train_update_s == pytest.approx(1.0, rel=0.1)
+    assert trace.v_train_logger_lag_s == 0.0
+    assert not any("updates every" in n for n in trace.notes)

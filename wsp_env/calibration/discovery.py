@@ -47,11 +47,16 @@ step (``_ground_speed_trail_s``). Where the two explain the balance alike, that 
 clear, breaks the tie (``_lag_verdict``); it is no veto beyond a tie, the fastest wheel's creep
 on a contaminated rail being too like a lag for that.
 
-The logger's own timing (a held and averaged ground speed, a GPS receiver's latency) leaves a
-lag of up to ``plausibility.LAG_MIN_S`` in every trace, which is not reported; it is part of the
-nominal model instead: a force effect must earn its place with the best such lag fitted
-alongside (``_timing_verdict``), and a longer lag must cut what that one leaves
-(``_lag_beyond_timing``) — else a resistance or a gradient stood in for the logger's timing.
+The logger's own timing (the log period, a GPS receiver's latency, an update the reader could
+not place) leaves a lag of up to ``plausibility.LAG_MIN_S`` in every trace, which is not
+reported; it is part of the nominal model instead: a force effect must earn its place with the
+best such lag fitted alongside (``_timing_verdict``), and a longer lag must cut what that one
+leaves (``_lag_beyond_timing``) — else a resistance or a gradient stood in for the logger's
+timing. Where the reader found GPS updates averaged over the log period, the column trails by
+half an update more (``Trace.v_train_logger_lag_s``); a ground-speed lag is reported only
+beyond that and ``LAG_MIN_S`` together (``plausibility.negligible``), while the timing fitted
+alongside force effects stays the sub-``LAG_MIN_S`` grid (the half update, 0.1 s at 5 Hz, is
+inside it).
 
 The wheels measure a pressure lag on their own clock (``wheel_lag``: the wheelset equation's
 adhesion force is smoothest through the valve's jumps at the brake's true lag; the ground speed
@@ -401,7 +406,9 @@ def _speed_lag_signature(predicted_drop: np.ndarray, t: np.ndarray, tau: float) 
 ANCHOR_Z = 2.0
 
 
-def _fit_sensor_lag(trace, residual, mask):
+def _fit_sensor_lag(
+    trace: Trace, residual: np.ndarray, mask: np.ndarray
+) -> tuple[dict[str, float], np.ndarray] | None:
     """Ground speed logged ``tau`` late: a grid over the lag (``_speed_lag_signature``) on the
     drop the current model predicts (the residual plus the logged drop).
 

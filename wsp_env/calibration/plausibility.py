@@ -49,7 +49,11 @@ PAD_SCALE_MIN = 0.03
 # a running-resistance formula is good to about a third (measured coast-downs scatter by that
 # with wind and rail condition): a change inside it is the formula's own uncertainty
 RESISTANCE_REL_MIN = 1.0 / 3.0
-LAG_MIN_S = 0.15  # a 10 Hz averaging log of a 5 Hz GPS fix lags by ~0.15 s by itself
+# the logging's timing resolution: a 10 Hz fix averaged over a 0.1 s log period trails by half a
+# period, a receiver's latency adds up to ~0.05 s, an update placed between two log samples is
+# off by up to half a period (a 5 Hz fix averaged at 10 Hz trails by half an update more, which
+# the reader finds and ``negligible`` takes off first)
+LAG_MIN_S = 0.15
 
 COASTING_CREEP_MAX_PCT = 8.0  # a rolling wheel reads at most radius + sensor errors off
 

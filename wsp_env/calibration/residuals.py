@@ -89,6 +89,12 @@ def balance_mask(trace: Trace) -> np.ndarray:
     return (trace.v_train_kmh > MIN_SPEED_KMH) & np.concatenate([[True], valid])
 
 
+def _anchor_window(t: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """The samples the balance's starting speed is the mean of: the first ``ANCHOR_S`` of
+    ``mask``."""
+    return mask & (t <= t[mask][0] + ANCHOR_S)
+
+
 def anchored(y: np.ndarray, t: np.ndarray, mask: np.ndarray) -> np.ndarray:
     """``y`` less its mean over the first ``ANCHOR_S`` of ``mask``.
 
@@ -98,27 +104,29 @@ def anchored(y: np.ndarray, t: np.ndarray, mask: np.ndarray) -> np.ndarray:
     """
     if not mask.any():
         return y
-    first = mask & (t <= t[mask][0] + ANCHOR_S)
-    return y - float(y[first].mean())
+    return y - float(y[_anchor_window(t, mask)].mean())
 
 
 def anchor_se_kmh(trace: Trace, mask: np.ndarray) -> float:
     """The standard error (km/h) of the balance's starting speed (``anchored``): the ground
     speed's noise over the independent values in the first ``ANCHOR_S`` of ``mask`` — every
-    sample, or where the reader found the speed held or averaged between updates, the updates
-    there (``Trace.v_train_update_s``; the interpolated samples between two updates carry
-    both, so one more than the window holds). A 1 Hz GPS fix on a 1 s lead-in leaves the
-    whole stop's balance offset by about one fix's noise."""
+    sample, or where the reader found updates held or averaged between (``Trace.
+    v_train_update_s``), the updates there, each with one update's noise (``Trace.
+    v_train_update_noise_kmh``); a sample between two updates carries both, so one more than
+    the window spans. A 1 Hz GPS fix on a 1 s lead-in leaves the whole stop's balance offset by
+    about one fix's noise."""
     if not mask.any():
         return 0.0
     t = trace.time_s
-    first = mask & (t <= t[mask][0] + ANCHOR_S)
+    first = _anchor_window(t, mask)
     update = trace.v_train_update_s
-    if update:
+    if update and trace.v_train_update_noise_kmh is not None:
         n_independent = float(np.ptp(t[first])) / update + 1.0
+        noise = trace.v_train_update_noise_kmh
     else:
         n_independent = float(first.sum())
-    return trace.ground_speed_noise_kmh / float(np.sqrt(max(n_independent, 1.0)))
+        noise = trace.ground_speed_noise_kmh
+    return noise / float(np.sqrt(max(n_independent, 1.0)))
 
 
 def train_speed_balance(trace: Trace) -> Channel:

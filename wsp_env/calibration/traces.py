@@ -61,6 +61,10 @@ class Trace:
     # interval where updates were averaged over the log period and left as logged
     # (``_averaged_updates``), else 0 (held updates are put back on time by ``_unhold``)
     v_train_logger_lag_s: float = 0.0
+    # the noise (km/h) of one update where the reader found updates (held: as
+    # ``v_train_noise_kmh``; averaged: measured on the fitted levels, while the samples' own
+    # noise stays what the channels are judged by); None: every sample is an update
+    v_train_update_noise_kmh: float | None = None
 
     @property
     def ground_speed_noise_kmh(self) -> float:
@@ -324,10 +328,14 @@ def read_trace(csv_path: str | Path) -> Trace:
                 cols[name] = _fill_gaps(path, name, cols[name], t, notes)
     _check_units(path, meta, cols, n)
     cols["v_train_kmh"], v_noise, v_update = _unhold(cols["v_train_kmh"], t, notes, gap_filled)
-    v_logger_lag = 0.0
-    if v_update is None:
-        v_update = _averaged_updates(cols["v_train_kmh"], t, notes, gap_filled)
-        v_logger_lag = 0.5 * v_update if v_update else 0.0
+    v_logger_lag, v_update_noise = 0.0, v_noise
+    if v_update is None:  # nothing held: perhaps updates averaged over the log period
+        averaged = _averaged_updates(cols["v_train_kmh"], t, notes, gap_filled)
+        if averaged is not None:
+            v_update, v_update_noise = averaged
+            v_logger_lag = 0.5 * v_update
+    elif not math.isfinite(v_update):  # held, but fewer than two updates to time
+        v_update = None
     v_axle = np.stack([cols[f"v_axle_{i}_kmh"] for i in range(1, n + 1)], axis=1)
     p_cyl = np.stack([cols[f"p_cyl_{i}_bar"] for i in range(1, n + 1)], axis=1)
     optional = {k: cols[k] for k in _OPTIONAL if k in cols}
@@ -335,7 +343,7 @@ def read_trace(csv_path: str | Path) -> Trace:
     extra = {k: v for k, v in cols.items() if k not in known}
     return Trace(
         path, meta, t, cols["v_train_kmh"], v_axle, p_cyl, optional, extra, notes, v_noise,
-        v_update, v_logger_lag,
+        v_update, v_logger_lag, v_update_noise,
     )  # fmt: skip
 
 
@@ -363,8 +371,9 @@ def _unhold(
     blend is dropped and its value places the change inside its averaging window — a blend
     ``w v_prev + (1 - w) v_next`` says the previous fix filled the first ``w`` of the window.
     Samples the reader interpolated across a gap (``filled``) are no update either.
-    Returns the speed, the noise measured on the updates and the median interval between
-    updates (both None where nothing was held)."""
+    Returns the speed, the noise measured on the updates (None where nothing was held or too
+    few updates to measure it) and the median interval between updates (None where nothing
+    was held, NaN where held with fewer than two updates)."""
     moving = v > 1.0
     repeats = np.concatenate([[False], np.diff(v) == 0.0])
     if moving.sum() < 10 or repeats[moving].mean() <= HELD_FRACTION:
@@ -398,14 +407,15 @@ def _unhold(
     out = np.interp(t, fix_t_arr[keep], fix_v_arr)
     d2 = np.diff(fix_v_arr[fix_v_arr > 1.0], 2)  # white noise on a smooth speed: MAD of d2
     noise = float(np.median(np.abs(d2)) / 0.6745 / np.sqrt(6.0)) if d2.size >= 5 else None
-    interval = float(np.median(np.diff(fix_t_arr))) if len(fix_t) > 1 else float("nan")
+    kept_t = fix_t_arr[keep]
+    interval = float(np.median(np.diff(kept_t))) if kept_t.size > 1 else float("nan")
     logger = "averaged (blends dropped)" if blends else "held"
     notes.append(
         f"column 'v_train_kmh': {logger} between updates (median interval {interval:.2f} s, "
         f"{100 * repeats[moving].mean():.0f} % of moving samples repeated): interpolated "
         "between the updates"
     )
-    return out, noise, (interval if math.isfinite(interval) else None)
+    return out, noise, interval
 
 
 # GPS update intervals (s) a logger may average without showing repeats (1.5-3.5 log periods:
@@ -450,58 +460,67 @@ def _ls_rss(design: sparse.csr_matrix, v: np.ndarray) -> tuple[float, np.ndarray
 
 def _averaged_updates(
     v: np.ndarray, t: np.ndarray, notes: list[str], filled: np.ndarray | None = None
-) -> float | None:
-    """The update interval of a GPS speed updated every ``P`` (a few log periods,
-    ``GPS_INTERVALS_S``) and averaged over each log period, or None. Such a column repeats
-    no sample for ``_unhold`` to find (a 5 Hz fix logged at 10 Hz: a blend of two fixes, then
-    the new fix alone), yet it trails the train by half an update more than the other
-    averaged columns (the pressures): ~0.1 s, a ground-speed lag in every trace that is the
-    logger's, not the sensor's.
+) -> tuple[float, float | None] | None:
+    """The update interval and the noise of one update of a GPS speed updated every ``P`` (a
+    few log periods, ``GPS_INTERVALS_S``) and averaged over each log period, or None. Such a
+    column repeats no sample for ``_unhold`` to find (a 5 Hz fix logged at 10 Hz: a blend of
+    two fixes, then the new fix alone), yet it trails the train by half an update more than
+    the other averaged columns (the pressures): ~0.1 s, a ground-speed lag in every trace that
+    is the logger's, not the sensor's.
 
     Each sample is modelled as the mean over its log period of a level held from one update
     to the next (updates every ``P``, at a phase on a grid of ``HELD_MODEL_PHASES``), the
     levels by least squares. Where the best such model leaves under ``HELD_MODEL_RATIO`` of
     what a piecewise-linear curve with a knot every ``P`` leaves (as many parameters, no
     holding; the median over four placements of its knots), the column is taken as held and
-    averaged (noted). The column itself is left as logged: its noise, measured on the
-    samples, is what the calibration has always judged such a column by. Samples the reader
-    filled across a gap are left out of the fit."""
+    averaged (noted), and the noise of one update is measured on the fitted levels (the
+    samples' own noise is lower: a blend averages two updates). The column itself is left as
+    logged, and its samples' noise stays what the channels are judged by. Samples the reader
+    filled across a gap are left out of the fit; a record with nothing to fit (a constant
+    speed: both models leave nothing) has no update interval to find."""
     fit = np.ones(v.size, dtype=bool) if filled is None else ~filled
     if (fit & (v > 1.0)).sum() < 50:
         return None
     period = float(np.median(np.diff(t)))
     tf, vf = t[fit], v[fit]
-    best: tuple[float, float] | None = None
+    best: tuple[float, float, np.ndarray] | None = None
     for interval in GPS_INTERVALS_S:
         if not 1.5 * period <= interval <= 3.5 * period:
             continue
         held = min(
-            _ls_rss(
-                _levels_design(
-                    tf, period, np.arange(t[0] - period - interval + phase, t[-1] + interval,
-                                          interval)
-                ),
-                vf,
-            )[0]
-            for phase in np.arange(HELD_MODEL_PHASES) * interval / HELD_MODEL_PHASES
+            (
+                _ls_rss(
+                    _levels_design(tf, period, np.arange(
+                        t[0] - period - interval + phase, t[-1] + interval, interval)),
+                    vf,
+                )
+                for phase in np.arange(HELD_MODEL_PHASES) * interval / HELD_MODEL_PHASES
+            ),
+            key=lambda fitted: fitted[0],
         )  # fmt: skip
         smooth = float(np.median([
             _ls_rss(_hat_design(tf, np.arange(t[0] - interval, t[-1] + 2 * interval, interval)
                                 + shift), vf)[0]
             for shift in np.arange(4) * interval / 4
         ]))  # fmt: skip
-        ratio = held / max(smooth, 1e-12)
+        if smooth <= 1e-6 * vf.size:  # a straight line leaves nothing: no noise to tell by
+            continue
+        ratio = held[0] / smooth
         if ratio < HELD_MODEL_RATIO and (best is None or ratio < best[0]):
-            best = (ratio, interval)
+            best = (ratio, interval, held[1])
     if best is None:
         return None
+    ratio, interval, levels = best
+    levels = levels[np.isfinite(levels)]
+    d2 = np.diff(levels[levels > 1.0], 2)  # white noise on a smooth speed: MAD of d2
+    noise = float(np.median(np.abs(d2)) / 0.6745 / np.sqrt(6.0)) if d2.size >= 5 else None
     notes.append(
-        f"column 'v_train_kmh': updates every {best[1]:g} s averaged over the {period:g} s log "
-        f"period (a held model leaves {100 * best[0]:.0f} % of a smooth curve's residual): "
-        f"it trails the train by ~{0.5 * best[1]:g} s more than the other columns, counted as "
-        "the logger's timing"
+        f"column 'v_train_kmh': updates every {interval:g} s averaged over the {period:g} s log "
+        f"period (a held model leaves {100 * ratio:.0f} % of a smooth curve's residual): it "
+        f"trails the train by ~{0.5 * interval:g} s more than the other columns, counted as the "
+        "logger's timing"
     )
-    return float(best[1])
+    return float(interval), noise
 
 
 def _hat_design(t: np.ndarray, knots: np.ndarray) -> sparse.csr_matrix:
