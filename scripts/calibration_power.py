@@ -82,6 +82,13 @@ SLIDE_POINT_KMH = 1.0
 TARGETS = {"false_positive_max": 0.02, "detection_min": 0.90, "pairs_min": 0.80}
 
 
+def sliding_rail(seed: int) -> str:
+    """The contaminant an adhesion-effect trace of ``seed`` is drawn on (``SLIDING_RAILS``),
+    from its own stream: the scenario's other draws stay those of the seed."""
+    names, p = SLIDING_RAILS
+    return str(np.random.default_rng([seed, 7]).choice(names, p=p))
+
+
 def _true_and_found(effect: Any, step: dict[str, Any], trace_meta: dict) -> tuple[float, float]:
     """(true value, found value) of the effect's main parameter, NaN where not comparable."""
     cat, p, q = effect.category, effect.params, step["parameters"]
@@ -154,17 +161,16 @@ def _run_one(job: dict[str, Any]) -> dict[str, Any]:
         if eff.category.startswith("sensor_"):  # scale vs lag: the parameter tells them apart
             key = "speed_scale_error" if eff.category == "sensor_scale" else "speed_lag_s"
             hits = [s for s in hits if key in s["parameters"]]
-        # not chosen, but named among the chosen effect's equally good alternatives: the trace
-        # could not tell them apart (reported beside the detection rate, never counted in it)
-        named = any(want in alt.split("+") for s in added for alt in s["alternatives"])
         # a choice made inside the tie margin: the effect found while another explains as
-        # well, or another chosen while this one does (the categories it tied with)
+        # well, or another chosen while this one is named among its equally good alternatives
+        # (the trace could not tell them apart: "named", reported beside the detection rate,
+        # never counted in it)
         if hits:
             tied = {c for alt in hits[0]["alternatives"] for c in alt.split("+")} - {want}
         else:
             tied = {s["category"] for s in added
                     if any(want in alt.split("+") for alt in s["alternatives"])}  # fmt: skip
-        row = {"category": eff.category, "found": bool(hits), "named": bool(hits) or named,
+        row = {"category": eff.category, "found": bool(hits), "named": bool(hits or tied),
                "tied_with": sorted(tied),
                "true": math.nan, "value": math.nan, "cut": math.nan}  # fmt: skip
         if hits:
@@ -241,9 +247,7 @@ def _jobs(args: argparse.Namespace) -> list[dict[str, Any]]:
                 job = {"kind": "single", "category": cat, "magnitude": mag,
                        "effects": [(cat, mag)], "seed": s}  # fmt: skip
                 if cat in ADHESION_CATEGORIES:
-                    names, p = SLIDING_RAILS
-                    rail = np.random.default_rng([s, 7]).choice(names, p=p)
-                    job["overrides"] = {"contaminant": str(rail)}
+                    job["overrides"] = {"contaminant": sliding_rail(s)}
                 jobs.append(job)
     for pi, pair in enumerate(PAIRS if args.pairs else []):
         for k in range(args.pairs):

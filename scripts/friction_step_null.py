@@ -88,8 +88,7 @@ def _one(job: dict[str, Any]) -> dict[str, Any]:
     from wsp_env.calibration.traces import read_trace
 
     rng = np.random.default_rng(job["seed"])
-    names, p = cp.SLIDING_RAILS
-    rail = str(np.random.default_rng([job["seed"], 7]).choice(names, p=p))
+    rail = cp.sliding_rail(job["seed"])
     scenario = ind.random_scenario(rng, contaminant=rail)
     effects = [cp._effect(ind, c, m, rng, scenario) for c, m in job["effects"]]
     columns, meta = ind.generate(scenario, effects, seed=job["seed"])

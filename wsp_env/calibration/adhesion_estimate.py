@@ -52,7 +52,7 @@ from scipy.integrate import cumulative_trapezoid
 from scipy.optimize import least_squares
 from scipy.signal import bilinear, lfilter, savgol_filter
 
-from wsp_env.calibration.traces import Trace
+from wsp_env.calibration.traces import Trace, noise_std
 
 G = 9.80665
 LOW_SLIDING_KMH = 0.2  # seed 000 §3: low-sliding critical points, 0 < DV < 0.2 km/h
@@ -121,13 +121,6 @@ def _uniform_derivative(t: np.ndarray, y: np.ndarray, window_s: float) -> np.nda
     if win <= 3:
         return np.interp(t, grid, np.gradient(yg, dt))
     return np.interp(t, grid, savgol_filter(yg, win, polyorder=2, deriv=1, delta=dt))
-
-
-def noise_std(y: np.ndarray) -> float:
-    """Std of white noise on a smooth signal, from the median absolute second difference
-    (robust to the signal's own curvature and to outliers)."""
-    d2 = np.diff(np.asarray(y, dtype=float), 2, axis=0).ravel()
-    return float(np.median(np.abs(d2)) / 0.6745 / np.sqrt(6.0)) if d2.size else 0.0
 
 
 def train_deceleration(trace: Trace, smooth_s: float = 1.0) -> np.ndarray:

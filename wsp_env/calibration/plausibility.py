@@ -169,21 +169,16 @@ def negligible(category: str, params: dict[str, float], trace: Trace) -> str | N
             f"ground-speed scale {100 * params['speed_scale_error']:+.2f} %: inside a sensor's "
             f"{100 * SPEED_SCALE_MIN:g} % calibration tolerance"
         )
-    logger = trace.v_train_logger_lag_s
-    if "speed_lag_s" in params and abs(params["speed_lag_s"]) - logger < LAG_MIN_S:
-        of_it = (
-            f", {logger:.2f} s of it the logger's averaging of {trace.v_train_update_s:g} s updates"
-            if logger
-            else ""
-        )
-        return (
-            f"ground-speed lag {params['speed_lag_s']:.3f} s{of_it}: inside the logging's "
-            f"{LAG_MIN_S:g} s resolution"
-        )
-    if "lag_s" in params and abs(params["lag_s"]) < LAG_MIN_S:
-        return (
-            f"pressure lag {params['lag_s']:.3f} s: inside the logging's {LAG_MIN_S:g} s resolution"
-        )
+    lags = (("speed_lag_s", "ground-speed lag", trace.v_train_logger_lag_s),
+            ("lag_s", "pressure lag", 0.0))  # fmt: skip
+    for key, what, logger in lags:
+        if key in params and abs(params[key]) - logger < LAG_MIN_S:
+            of_it = (f", {logger:.2f} s of it the logger's averaging of "
+                     f"{trace.v_train_update_s:g} s updates" if logger else "")  # fmt: skip
+            return (
+                f"{what} {params[key]:.3f} s{of_it}: inside the logging's {LAG_MIN_S:g} s "
+                "resolution"
+            )
     return None
 
 

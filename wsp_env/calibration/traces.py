@@ -72,8 +72,7 @@ class Trace:
         interpolated record has no sample noise left to see), else on the samples."""
         if self.v_train_noise_kmh is not None:
             return self.v_train_noise_kmh
-        d2 = np.diff(np.asarray(self.v_train_kmh, dtype=float), 2)
-        return float(np.median(np.abs(d2)) / 0.6745 / np.sqrt(6.0)) if d2.size else 0.0
+        return noise_std(self.v_train_kmh)
 
     @property
     def n_axles(self) -> int:
@@ -97,6 +96,20 @@ class Trace:
         """(T, n_axles) nominal brake torque ``gain_i (p_i - p_th)^+`` from the metadata."""
         p_th = p_threshold_bar(self)
         return self.axle_torque_gains()[None, :] * np.maximum(0.0, self.p_cyl_bar - p_th)
+
+
+def noise_std(y: np.ndarray) -> float:
+    """Std of white noise on a smooth signal, from the median absolute second difference
+    (robust to the signal's own curvature and to outliers)."""
+    d2 = np.diff(np.asarray(y, dtype=float), 2, axis=0).ravel()
+    return float(np.median(np.abs(d2)) / 0.6745 / np.sqrt(6.0)) if d2.size else 0.0
+
+
+def _updates_noise_kmh(levels: np.ndarray) -> float | None:
+    """One update's noise (km/h, ``noise_std``) on the values of the moving updates; None
+    with fewer than 7 of them (5 second differences)."""
+    moving = levels[levels > 1.0]
+    return noise_std(moving) if moving.size >= 7 else None
 
 
 BRAKED_MARGIN_BAR = 0.05  # above the brake's threshold: a pressure sensor's offset is no brake
@@ -405,8 +418,7 @@ def _unhold(
     keep = np.concatenate([[True], np.diff(fix_t_arr) > 0.0])
     fix_v_arr = np.asarray(fix_v)[keep]
     out = np.interp(t, fix_t_arr[keep], fix_v_arr)
-    d2 = np.diff(fix_v_arr[fix_v_arr > 1.0], 2)  # white noise on a smooth speed: MAD of d2
-    noise = float(np.median(np.abs(d2)) / 0.6745 / np.sqrt(6.0)) if d2.size >= 5 else None
+    noise = _updates_noise_kmh(fix_v_arr)
     kept_t = fix_t_arr[keep]
     interval = float(np.median(np.diff(kept_t))) if kept_t.size > 1 else float("nan")
     logger = "averaged (blends dropped)" if blends else "held"
@@ -511,9 +523,7 @@ def _averaged_updates(
     if best is None:
         return None
     ratio, interval, levels = best
-    levels = levels[np.isfinite(levels)]
-    d2 = np.diff(levels[levels > 1.0], 2)  # white noise on a smooth speed: MAD of d2
-    noise = float(np.median(np.abs(d2)) / 0.6745 / np.sqrt(6.0)) if d2.size >= 5 else None
+    noise = _updates_noise_kmh(levels[np.isfinite(levels)])
     notes.append(
         f"column 'v_train_kmh': updates every {interval:g} s averaged over the {period:g} s log "
         f"period (a held model leaves {100 * ratio:.0f} % of a smooth curve's residual): it "
