@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv
 
-from wsp_env.env import WSPBrakingVectorEnv
+from wsp_env.envs import WSPBrakingVectorEnv
 
 
 class SB3VecEnv(VecEnv):

@@ -50,8 +50,8 @@ from typing import Any
 
 import numpy as np
 
-from wsp_env import env_kernel as K
-from wsp_env.config import ConfigError, _configs_root, from_dict, read_yaml
+from wsp_env.core import kernel as K
+from wsp_env.core.config import ConfigError, configs_root, from_dict, read_yaml
 from wsp_env.physics.layout import EP_P_MAX
 
 VENT, HOLD, APPLY = 0, 1, 2
@@ -85,7 +85,7 @@ class WSPConfig:
 
 def load_wsp_config(path: str | Path | None = None) -> WSPConfig:
     """Load thresholds (``configs/wsp/classical.yaml`` by default); errors name file and field."""
-    p = Path(path) if path is not None else _configs_root() / "wsp" / "classical.yaml"
+    p = Path(path) if path is not None else configs_root() / "wsp" / "classical.yaml"
     try:
         return from_dict(WSPConfig, read_yaml(p) or {})
     except ConfigError as err:

@@ -66,7 +66,7 @@ def main() -> None:
         text, runs[name] = table(name)
         print(f"### {name}\n\n{text}\n", flush=True)
     if args.json is not None:
-        from wsp_env.cli import write_json
+        from wsp_env.files import write_json
 
         write_json(args.json, {"runs": runs})
         print(f"wrote {args.json}")

@@ -34,37 +34,17 @@ import yaml
 from scipy.integrate import cumulative_trapezoid
 from scipy.signal import savgol_filter
 
-import wsp_env.env as env_module
 from wsp_env.calibration.adhesion_estimate import estimate_adhesion, fit_polach
 from wsp_env.calibration.discovery import discover, fit_adhesion_model
 from wsp_env.calibration.synthetic import simulate_trace
 from wsp_env.calibration.traces import read_trace
 from wsp_env.cli import main as cli_main
-from wsp_env.config import RecoveryConfig, load_rail
-from wsp_env.physics import layout as L
+from wsp_env.core.config import RecoveryConfig, load_rail
+from wsp_env.evaluation.runner import run_one
+from wsp_env.evaluation.trace_writer import SensorModel
 from wsp_env.policy import make_policy
-from wsp_env.runner import run_one
-from wsp_env.trace_io import SensorModel
 
 NOISY = SensorModel(sample_period_s=0.1, speed_noise_kmh=0.1, pressure_noise_bar=0.01)
-
-
-def _true_forces(run):
-    """Run ``run()`` while recording env 0's per-axle adhesion force after every control step."""
-    log: list[tuple[float, np.ndarray]] = []
-    original = env_module._BrakingCore.step
-
-    def step(self, actions):
-        original(self, actions)
-        log.append((float(self.sim.time_s[0]), self.sim.axle_state[0, :, L.AS_F].copy()))
-
-    env_module._BrakingCore.step = step
-    try:
-        out = run()
-    finally:
-        env_module._BrakingCore.step = original
-    t = np.array([row[0] for row in log])
-    return out, t, np.array([row[1] for row in log])
 
 
 def force_estimate(directory: Path) -> None:
@@ -77,16 +57,16 @@ def force_estimate(directory: Path) -> None:
     print("1. adhesion force estimate vs the simulator's force (uic_z1, 120 km/h, Eq. 9 rail)")
     for period in (0.1, 0.02):
         sensors = SensorModel(sample_period_s=period)
-        (csv_path, _, _), t_true, f_true = _true_forces(
-            lambda s=sensors, p=period: simulate_trace(
-                directory / f"force_{p}",
-                rail,
-                120.0,
-                sensors=s,
-                mu_contaminated=0.08,
-                pattern="uniform",
-            )
+        csv_path, _, _, truth = simulate_trace(
+            directory / f"force_{period}",
+            rail,
+            120.0,
+            sensors=sensors,
+            mu_contaminated=0.08,
+            pattern="uniform",
+            return_record=True,
         )
+        t_true, f_true = truth.time_s, truth.f_adhesion_N
         trace = read_trace(csv_path)
         t = trace.time_s
         errors, errors_sg = [], []

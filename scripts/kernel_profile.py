@@ -45,9 +45,9 @@ VARIANTS = {
 
 
 def time_variant(name: str) -> float:
-    from wsp_env.config import load_rail, load_vehicle
+    from wsp_env.core.config import load_rail, load_vehicle
+    from wsp_env.core.simulator import TrainSim, draw_run_setup
     from wsp_env.physics import layout as L
-    from wsp_env.simulator import TrainSim, draw_run_setup
 
     src = SOURCE.read_text().replace('"cache": True', '"cache": False')
     for old, new in VARIANTS[name]:

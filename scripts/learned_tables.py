@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
-from wsp_env.config import from_dict, load_rails, load_vehicle
+from wsp_env.core.config import from_dict, load_rails, load_vehicle
 from wsp_env.evaluation import SuiteConfig, load_suite, run_suite
 from wsp_env.policy import make_policy
 

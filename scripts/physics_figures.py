@@ -13,9 +13,9 @@ import time
 
 import numpy as np
 
-from wsp_env.config import load_rail, load_vehicle
-from wsp_env.metrics import run_metrics
-from wsp_env.simulator import RunSetup, TrainSim
+from wsp_env.core.config import load_rail, load_vehicle
+from wsp_env.core.metrics import run_metrics
+from wsp_env.core.simulator import RunSetup, TrainSim
 
 KMH = 1 / 3.6
 

@@ -21,13 +21,13 @@ from pathlib import Path
 import numpy as np
 
 from wsp_env.baselines.classical import ClassicalWSP, WSPConfig, load_wsp_config
-from wsp_env.config import _configs_root, load_rails
+from wsp_env.core.config import configs_root, load_rails
 from wsp_env.evaluation import load_suite, run_suite
-from wsp_env.plotting import plot_run
+from wsp_env.evaluation.plotting import plot_run
 from wsp_env.policy import NoWSP
-from wsp_env.validate import SEED002_LOCK_MARGIN, TABLE6, TABLE6_STD, TABLE7_M
+from wsp_env.validation.targets import SEED002_LOCK_MARGIN, TABLE6, TABLE6_STD, TABLE7_M
 
-WSP_CONFIG = _configs_root() / "wsp" / "seed002_uic_z1.yaml"
+WSP_CONFIG = configs_root() / "wsp" / "seed002_uic_z1.yaml"
 # the test WSP's fitted thresholds and their search ranges
 FITTED = {
     "slip_rel": (0.1, 0.45),

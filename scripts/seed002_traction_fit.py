@@ -30,15 +30,8 @@ from typing import Any
 import numpy as np
 
 from wsp_env.baselines.antiskid import AntiSkid, AntiSkidConfig
-from wsp_env.traction import (
-    DURATION_S,
-    MU_C,
-    TABLE9_KMH,
-    TABLE9_WIDEN_KMH,
-    TABLE10_M,
-    run_traction,
-    seed002_rail,
-)
+from wsp_env.rig.traction import DURATION_S, MU_C, run_traction, seed002_rail
+from wsp_env.validation.targets import TABLE9_KMH, TABLE9_WIDEN_KMH, TABLE10_M
 
 RANGES = {
     "slip_abs_kmh": (0.5, 4.0),

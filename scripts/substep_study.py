@@ -7,8 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from wsp_env.config import load_rail, load_vehicle
-from wsp_env.simulator import RunSetup, TrainSim
+from wsp_env.core.config import load_rail, load_vehicle
+from wsp_env.core.simulator import RunSetup, TrainSim
 
 
 def pulse(n: int) -> np.ndarray:

@@ -13,12 +13,12 @@ import dataclasses
 
 import numpy as np
 
-from wsp_env.config import load_vehicle
+from wsp_env.core.config import load_vehicle
+from wsp_env.core.simulator import RunSetup, TrainSim
 from wsp_env.physics import layout as L
 from wsp_env.physics.adhesion import peak_adhesion
 from wsp_env.physics.rail import recovered_level
-from wsp_env.simulator import RunSetup, TrainSim
-from wsp_env.traction import MU_C, TORQUE_NM, run_traction, seed002_rail
+from wsp_env.rig.traction import MU_C, TORQUE_NM, run_traction, seed002_rail
 
 
 def main() -> None:

@@ -7,8 +7,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from wsp_env.config import load_rail, load_vehicle
-from wsp_env.simulator import RunSetup, TrainSim
+from wsp_env.core.config import load_rail, load_vehicle
+from wsp_env.core.simulator import RunSetup, TrainSim
 
 
 def instant_brake(vehicle_id: str = "uic_z1", resistance: bool = False):

@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 from conftest import instant_brake, single
 
-from wsp_env.config import load_rail, load_vehicle
+from wsp_env.core.config import load_rail, load_vehicle
+from wsp_env.core.simulator import TrainSim
 from wsp_env.physics import adhesion as A
 from wsp_env.physics import layout as L
-from wsp_env.simulator import TrainSim
 
 N = 110e3  # axle load, N
 CA = 2 * 9.7e6  # axle Kalker stiffness (both wheels), N (UIC-Z1, see test_contact)
@@ -254,7 +254,7 @@ def test_injection_contaminates_only_while_spraying():
 
     rail = dataclasses.replace(load_rail("soap"), contamination=0.0)
     sim = TrainSim(load_vehicle("uic_z1"))
-    from wsp_env.simulator import RunSetup
+    from wsp_env.core.simulator import RunSetup
 
     sim.configure(
         0, RunSetup(100.0, rail, background=0.0, injection_level=1.0, injection_until_s=5.0)

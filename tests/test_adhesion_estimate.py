@@ -19,8 +19,8 @@ from wsp_env.calibration.adhesion_estimate import (
 from wsp_env.calibration.discovery import fit_adhesion_model
 from wsp_env.calibration.synthetic import simulate_trace
 from wsp_env.calibration.traces import read_trace
-from wsp_env.config import RecoveryConfig, load_rail
-from wsp_env.trace_io import SensorModel
+from wsp_env.core.config import RecoveryConfig, load_rail
+from wsp_env.evaluation.trace_writer import SensorModel
 
 MU0, K, K_ROZV = 0.1497, 30.0, 0.0291  # seed 000 Table 4, axle 1
 
@@ -103,7 +103,7 @@ def test_soap_cleaning_shows_in_the_fitted_mu0_oil_does_not(tmp_path, seed):
     leading ones cleaned the rail); on oil they do not. Compared per bogie, because single axles
     carry the bogie-pitch load-transfer bias the metadata cannot remove."""
     from wsp_env.calibration.synthetic import simulate_trace
-    from wsp_env.config import load_rail
+    from wsp_env.core.config import load_rail
 
     sensors = SensorModel(sample_period_s=0.1, speed_noise_kmh=0.1, pressure_noise_bar=0.01)
     ratios = {}

@@ -9,10 +9,10 @@ from pathlib import Path
 
 import pytest
 import yaml
+from test_trace_io import read_csv
 
 from wsp_env.cli import main
-from wsp_env.config import ConfigError, load_rails, load_vehicle
-from wsp_env.trace_io import read_trace_basic
+from wsp_env.core.config import ConfigError, load_rails, load_vehicle
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -147,7 +147,7 @@ def test_simulate_writes_json_plot_and_trace(tmp_path, capsys):
             "sliding_energy_kJ",
         }
     assert (tmp_path / "run.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    cols, meta = read_trace_basic(tmp_path / "t.csv")
+    cols, meta = read_csv(tmp_path / "t.csv")
     assert meta["format"] == "wsp-trace/1" and meta["vehicle"]["n_axles"] == 4
     assert cols["v_train_kmh"][0] == pytest.approx(80, abs=1.0)
     assert "stop" in capsys.readouterr().out
@@ -168,8 +168,8 @@ def test_simulate_runs_the_wsp_policies_on_the_evaluation_path(tmp_path):
     """--policy takes the evaluation's policy names (DESIGN §8): on the same seed, the
     classical WSP and the oracle keep the wheels from locking that full demand locks, and the
     stop matches ``wsp-env evaluate``'s code path (one run of a suite)."""
+    from wsp_env.evaluation.runner import run_one
     from wsp_env.policy import make_policy
-    from wsp_env.runner import run_one
 
     results = {}
     for policy in ("none", "classical", "oracle"):

@@ -14,8 +14,8 @@ from wsp_env.calibration.discovery import discover
 from wsp_env.calibration.synthetic import simulate_trace
 from wsp_env.calibration.traces import read_trace
 from wsp_env.cli import main
-from wsp_env.config import load_rail
-from wsp_env.trace_io import SensorModel
+from wsp_env.core.config import load_rail
+from wsp_env.evaluation.trace_writer import SensorModel
 
 SENSORS = SensorModel(sample_period_s=0.1, speed_noise_kmh=0.1, pressure_noise_bar=0.01)
 # Soap (seed 002 law and recovery) without rail cleaning: the calibration's nominal adhesion
@@ -243,9 +243,9 @@ def test_loop_holds_beyond_its_own_generator(tmp_path, variant):
         grade = -35.0
     kwargs = {}
     if variant == "other_wsp":  # the seed 002 thresholds: a much more tolerant WSP
-        from wsp_env.config import _configs_root
+        from wsp_env.core.config import configs_root
 
-        kwargs["wsp_config"] = str(_configs_root() / "wsp" / "seed002_uic_z1.yaml")
+        kwargs["wsp_config"] = str(configs_root() / "wsp" / "seed002_uic_z1.yaml")
     clean = _trace(tmp_path, "clean", seed=3, sensors=sensors, **kwargs)
     sloped = _trace(tmp_path, "sloped", seed=3, sensors=sensors, gradient_permille=grade, **kwargs)
     if variant == "vendor_names":
@@ -336,8 +336,8 @@ def test_calibrated_config_reproduces_the_measured_stop(tmp_path, effect):
     import yaml
     from scipy.integrate import cumulative_trapezoid
 
+    from wsp_env.evaluation.runner import run_one
     from wsp_env.policy import make_policy
-    from wsp_env.runner import run_one
 
     path = _trace(tmp_path, "loop", **effect)
     rails = tmp_path / "calibrated.yaml"

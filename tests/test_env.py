@@ -10,8 +10,8 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import wsp_env  # noqa: F401  (registers WSPBraking-v0)
-from wsp_env import env_kernel as K
-from wsp_env.env import WSPBrakingEnv, WSPBrakingVectorEnv
+from wsp_env.core import kernel as K
+from wsp_env.envs import WSPBrakingEnv, WSPBrakingVectorEnv
 
 VEHICLES = ["uic_z1", "e402b", "etr1000", "regiolis"]
 

@@ -10,7 +10,7 @@ import pytest
 
 from wsp_env.baselines.classical import load_wsp_config
 from wsp_env.cli import main
-from wsp_env.config import ConfigError, load_vehicle
+from wsp_env.core.config import ConfigError, load_vehicle
 from wsp_env.evaluation import CaseConfig, SuiteConfig, load_suite, run_suite, summarise
 from wsp_env.policy import NoWSP, make_policy
 
@@ -185,7 +185,7 @@ def test_classical_wsp_reapplies_in_steps_and_stays_silent_on_dry_rail():
     """After a vent the WSP fills in pulses (apply, hold, apply, ...) below the demand; on dry
     rail it never leaves apply (its reference follows the train: no false slide)."""
     from wsp_env.baselines.classical import ClassicalWSP
-    from wsp_env.env import WSPBrakingVectorEnv
+    from wsp_env.envs import WSPBrakingVectorEnv
 
     def actions(rail):
         venv = WSPBrakingVectorEnv(num_envs=1, vehicle="uic_z1")

@@ -11,9 +11,9 @@ import yaml
 from test_train import _config
 
 from wsp_env.cli import main
-from wsp_env.env import _BrakingCore
-from wsp_env.imitation import make_teacher
+from wsp_env.core.braking import BrakingCore
 from wsp_env.policy import SB3Policy
+from wsp_env.training.imitation import make_teacher
 
 PRETRAIN = {
     "teacher": "oracle_peak", "rounds": 2, "steps_per_round": 8192, "warmup_steps": 2048,
@@ -23,7 +23,7 @@ PRETRAIN = {
 
 def _teacher_gap(policy: SB3Policy, seed: int) -> float:
     """Mean |student - teacher| action over a soap stop the student drives (its own states)."""
-    core = _BrakingCore(4, **policy.env_kwargs)
+    core = BrakingCore(4, **policy.env_kwargs)
     for e in range(4):
         core.rngs[e] = np.random.default_rng(seed + e)
         core.reset_env(e, {"rail": "soap", "speed_kmh": 40, "mu_contaminated": 0.07})

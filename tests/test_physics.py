@@ -9,10 +9,10 @@ import pytest
 from conftest import instant_brake, run_to_stop, single
 from scipy.integrate import solve_ivp
 
-from wsp_env.config import load_rail, load_vehicle
-from wsp_env.metrics import run_metrics
+from wsp_env.core.config import load_rail, load_vehicle
+from wsp_env.core.metrics import run_metrics
+from wsp_env.core.simulator import RunSetup, TrainSim
 from wsp_env.physics import layout as L
-from wsp_env.simulator import RunSetup, TrainSim
 
 KMH = 1 / 3.6
 

@@ -8,9 +8,9 @@ import numpy as np
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from wsp_env.config import load_rail, load_vehicle
+from wsp_env.core.config import load_rail, load_vehicle
+from wsp_env.core.simulator import RunSetup, TrainSim
 from wsp_env.physics import layout as L
-from wsp_env.simulator import RunSetup, TrainSim
 
 BASE = load_vehicle("uic_z1")
 RAILS = {name: load_rail(name) for name in ("dry", "wet", "soap", "oil", "leaves", "soap_etr1000")}

@@ -14,7 +14,8 @@ import yaml
 from test_train import _config
 
 from wsp_env.cli import main
-from wsp_env.env import WSPBrakingEnv, WSPBrakingVectorEnv, _BrakingCore
+from wsp_env.core.braking import BrakingCore
+from wsp_env.envs import WSPBrakingEnv, WSPBrakingVectorEnv
 from wsp_env.evaluation import load_suite, run_suite
 from wsp_env.policy import META_NAME, SB3Policy, make_policy
 
@@ -147,7 +148,7 @@ def test_onnx_export_matches_the_sb3_policy(residual_run, tmp_path):
     meta = session.get_modelmeta().custom_metadata_map
     fill = np.asarray(json.loads(meta["frame_fill"]), dtype=np.float32)
     policy = SB3Policy(out / "best_model.zip")
-    core = _BrakingCore(4, **policy.env_kwargs)
+    core = BrakingCore(4, **policy.env_kwargs)
     for e in range(4):
         core.rngs[e] = np.random.default_rng(e)
         core.reset_env(e, {"rail": "soap", "speed_kmh": 60})

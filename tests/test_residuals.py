@@ -9,8 +9,8 @@ import pytest
 from wsp_env.calibration.residuals import channels
 from wsp_env.calibration.synthetic import simulate_trace
 from wsp_env.calibration.traces import read_trace
-from wsp_env.config import load_rail
-from wsp_env.trace_io import SensorModel
+from wsp_env.core.config import load_rail
+from wsp_env.evaluation.trace_writer import SensorModel
 
 SENSORS = SensorModel(sample_period_s=0.1, speed_noise_kmh=0.1, pressure_noise_bar=0.01)
 CASES = {

@@ -7,8 +7,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from wsp_env import env_kernel as K
-from wsp_env.env import TERM_NAMES, RewardConfig, WSPBrakingVectorEnv
+from wsp_env.core import kernel as K
+from wsp_env.core.braking import TERM_NAMES, RewardConfig
+from wsp_env.envs import WSPBrakingVectorEnv
 from wsp_env.policy import make_policy
 
 

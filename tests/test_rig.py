@@ -9,7 +9,7 @@ import pytest
 
 from wsp_env.cli import main
 from wsp_env.policy import NoWSP, make_policy
-from wsp_env.rig import RigConfig, RollerRig, rig_test
+from wsp_env.rig.roller_rig import RigConfig, RollerRig, rig_test
 
 
 @pytest.mark.parametrize("signal", ["contact", "drive"])

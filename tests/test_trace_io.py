@@ -1,7 +1,13 @@
-"""Tests of wsp_env.trace_io (wsp-trace/1 writing, sampling, basic reading) and plot_run."""
+"""Tests of the wsp-trace/1 writer (``evaluation.trace_writer``: sampling, writing) and plot_run.
+
+Written files are read back by ``read_csv`` below, a plain ``csv``-module reader that shares no
+code with the package; the package's own reader (``calibration.traces.read_trace``) is tested in
+``test_traces.py``.
+"""
 
 from __future__ import annotations
 
+import csv
 import json
 import os
 import re
@@ -10,17 +16,26 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from wsp_env import trace_io
-from wsp_env.plotting import plot_run
-from wsp_env.trace_io import (
-    RunRecord,
-    SensorModel,
-    read_trace_basic,
-    sample_run,
-    write_trace,
-)
+import wsp_env.files
+from wsp_env.calibration.traces import TraceError, read_trace
+from wsp_env.core.records import RunRecord
+from wsp_env.evaluation.plotting import plot_run
+from wsp_env.evaluation.trace_writer import SensorModel, sample_run, write_trace
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+
+
+def read_csv(csv_path: Path) -> tuple[dict[str, np.ndarray], dict]:
+    """A written trace's columns (float, empty cells NaN, file order) and metadata."""
+    with open(csv_path, encoding="utf-8", newline="") as fh:
+        rows = list(csv.reader(fh))
+    header, body = rows[0], rows[1:]
+    columns = {
+        name: np.array([float(r[j]) if r[j].strip() else np.nan for r in body])
+        for j, name in enumerate(header)
+    }
+    meta_path = csv_path.with_name(csv_path.name[: -len(".csv")] + ".meta.json")
+    return columns, json.loads(meta_path.read_text())
 
 
 def make_meta(n_axles: int = 4) -> dict:
@@ -112,7 +127,7 @@ def test_round_trip(tmp_path: Path) -> None:
     assert meta_path == tmp_path / "run7.meta.json"
     assert "format" not in meta  # the caller's dict is not modified
 
-    read, read_meta = read_trace_basic(csv_path)
+    read, read_meta = read_csv(csv_path)
     assert list(read) == list(columns)
     for name, col in columns.items():
         want = np.asarray(col, dtype=float)
@@ -357,7 +372,7 @@ def test_failure_in_replace_leaves_nothing(tmp_path: Path, monkeypatch, fail_on_
             raise OSError("replace failed")
         return real_replace(src, dst)
 
-    monkeypatch.setattr(trace_io.os, "replace", flaky_replace)
+    monkeypatch.setattr(wsp_env.files.os, "replace", flaky_replace)
     with pytest.raises(OSError, match="replace failed"):
         write_trace(tmp_path / "run", sampled_columns(), make_meta())
     assert os.listdir(tmp_path) == []
@@ -367,31 +382,34 @@ def test_time_precision_grows_when_needed(tmp_path: Path) -> None:
     cols = sampled_columns()
     cols["time_s"] = 1e-5 * np.arange(cols["time_s"].size)  # would collapse at %.4f
     csv_path, _ = write_trace(tmp_path / "fast", cols, make_meta())
-    read, _ = read_trace_basic(csv_path)
+    read, _ = read_csv(csv_path)
     assert np.all(np.diff(read["time_s"]) > 0)
 
 
-def test_read_rejects_malformed(tmp_path: Path) -> None:
+def test_written_malformed_is_one_line_from_the_reader(tmp_path: Path) -> None:
+    """A written trace spoilt by hand: the package's one reader names the line or column."""
     csv_path, _ = write_trace(tmp_path / "r", sampled_columns(), make_meta())
     original = csv_path.read_text().splitlines()
 
     lines = list(original)
     lines[3] = lines[3].replace(",", ",0,", 1)  # one field too many on line 4
     csv_path.write_text("\n".join(lines) + "\n")
-    with pytest.raises(ValueError, match="line 4 has"):
-        read_trace_basic(csv_path)
+    with pytest.raises(TraceError, match="line 4: 18 fields, header has 17"):
+        read_trace(csv_path)
 
     lines = list(original)
     fields = lines[5].split(",")
     fields[1] = "fast"
     lines[5] = ",".join(fields)
     csv_path.write_text("\n".join(lines) + "\n")
-    with pytest.raises(ValueError, match="column v_train_kmh: non-numeric"):
-        read_trace_basic(csv_path)
+    with pytest.raises(
+        TraceError, match="column 'v_train_kmh': non-numeric value 'fast' on line 6"
+    ):
+        read_trace(csv_path)
 
     (tmp_path / "r.meta.json").unlink()
-    with pytest.raises(ValueError, match="metadata file not found"):
-        read_trace_basic(csv_path)
+    with pytest.raises(TraceError, match="metadata file missing"):
+        read_trace(csv_path)
 
 
 # ------------------------------------------------------------------------------------------
@@ -415,7 +433,7 @@ def test_written_files_get_the_usual_permissions(tmp_path):
     import os
     import stat
 
-    from wsp_env.trace_io import write_atomically
+    from wsp_env.files import write_atomically
 
     target = write_atomically(tmp_path / "x.txt", lambda fh: fh.write("hi"))
     mask = os.umask(0)

@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 
 from wsp_env.calibration.traces import TraceError, _averaged_updates, read_trace
-from wsp_env.config import load_vehicle
+from wsp_env.core.config import load_vehicle
+from wsp_env.evaluation.runner import run_one, trace_metadata
+from wsp_env.evaluation.trace_writer import SensorModel, sample_run, write_trace
 from wsp_env.policy import NoWSP
-from wsp_env.runner import run_one, trace_metadata
-from wsp_env.trace_io import SensorModel, sample_run, write_trace
 
 
 @pytest.fixture(scope="module")

@@ -8,10 +8,12 @@ import json
 import numpy as np
 
 from wsp_env.cli import main
-from wsp_env.config import load_rails, load_vehicle
+from wsp_env.core.config import load_rails, load_vehicle
+from wsp_env.core.simulator import RunSetup, TrainSim
 from wsp_env.physics import layout as L
-from wsp_env.simulator import RunSetup, TrainSim
-from wsp_env.traction import TABLE10_M, run_traction, seed002_traction_check
+from wsp_env.rig.traction import run_traction
+from wsp_env.validation.checks import seed002_traction_check
+from wsp_env.validation.targets import TABLE10_M
 
 
 def test_traction_on_dry_rail_is_rigid_body_acceleration():
@@ -68,7 +70,7 @@ def test_traction_recovery_is_seldom_reached_as_seed002_says():
     Eq. 10 as written (specific sliding against the wheel's speed, J/m) puts W_lim at ~8 % of
     slip: the axles pass it only in the slips at low speed (measured 21 / 5 / 9 / 3 % of the
     test on axles 1-4); the sliding-power reading (W) would pass it 47 / 24 / 32 / 3 %."""
-    from wsp_env.traction import seed002_rail
+    from wsp_env.rig.traction import seed002_rail
 
     rail = seed002_rail()
     sim = TrainSim(load_vehicle("e402b"), n_envs=1)

@@ -14,10 +14,11 @@ import torch
 import yaml
 
 from wsp_env.cli import main
-from wsp_env.env import WSPBrakingVectorEnv, _BrakingCore
+from wsp_env.core.braking import BrakingCore
+from wsp_env.envs import WSPBrakingVectorEnv
 from wsp_env.evaluation import load_suite, run_suite
 from wsp_env.policy import SB3Policy, make_policy
-from wsp_env.training import LinearSchedule, latest_checkpoint, load_train_config
+from wsp_env.training.train import LinearSchedule, latest_checkpoint, load_train_config
 
 SUITE = {
     "name": "tiny",
@@ -203,8 +204,8 @@ def test_discrete_models_are_evaluated_in_discrete_mode(tmp_path):
     policy = make_policy(str(out / "model.zip"))
     assert policy.env_kwargs["action_mode"] == "discrete"
     with pytest.raises(ValueError, match="actions"):
-        policy.bind(_BrakingCore(2))  # a continuous environment refuses it
-    core = _BrakingCore(2, action_mode="discrete")
+        policy.bind(BrakingCore(2))  # a continuous environment refuses it
+    core = BrakingCore(2, action_mode="discrete")
     policy.bind(core)
     actions = policy.act(core.obs)
     assert actions.shape == (2, 4) and np.isin(actions, (0, 1, 2)).all()
@@ -281,7 +282,7 @@ def test_stacked_and_recurrent_policies_evaluate_with_their_memory(tmp_path, cha
     cfg = _config(tmp_path, n_timesteps=256, **changes)
     assert main(["train", "--config", str(cfg), "--out", str(out), "--no-progress"]) == 0
     policy = make_policy(str(out / "model.zip"))
-    core = _BrakingCore(2)
+    core = BrakingCore(2)
     policy.bind(core)
 
     def memory():
@@ -304,9 +305,9 @@ def test_stacked_and_recurrent_policies_evaluate_with_their_memory(tmp_path, cha
 
 
 def test_shipped_training_configs_load():
-    from wsp_env.config import _configs_root
+    from wsp_env.core.config import configs_root
 
-    paths = sorted((_configs_root() / "train").glob("*.yaml"))
+    paths = sorted((configs_root() / "train").glob("*.yaml"))
     assert paths
     for p in paths:
         cfg = load_train_config(p)
@@ -315,7 +316,7 @@ def test_shipped_training_configs_load():
 
 def test_a_run_failing_before_its_first_checkpoint_leaves_no_folder(tmp_path, monkeypatch):
     """Otherwise it could neither be started again in place nor resumed."""
-    from wsp_env import training
+    from wsp_env.training import train as training
 
     def broken(*args, **kwargs):
         raise RuntimeError("broken on purpose")

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from wsp_env.cli import main
-from wsp_env.validate import TABLE4, TABLE6
+from wsp_env.validation.targets import TABLE4, TABLE6
 
 
 @pytest.fixture(scope="module")

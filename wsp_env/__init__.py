@@ -11,6 +11,6 @@ __version__ = "0.1.0"
 if "WSPBraking-v0" not in registry:
     register(
         id="WSPBraking-v0",
-        entry_point="wsp_env.env:WSPBrakingEnv",
-        vector_entry_point="wsp_env.env:WSPBrakingVectorEnv",
+        entry_point="wsp_env.envs:WSPBrakingEnv",
+        vector_entry_point="wsp_env.envs:WSPBrakingVectorEnv",
     )

@@ -7,46 +7,18 @@ or argument, and exit status 2 — never a traceback, never a half-written outpu
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from wsp_env.config import ConfigError, from_dict, load_rail, load_vehicle
-from wsp_env.trace_io import write_atomically
+from wsp_env.core.config import ConfigError, from_dict, load_rail, load_vehicle
+from wsp_env.files import write_json
 
 
 class UserError(Exception):
     """A mistake in the user's input; its message is printed as one line."""
-
-
-def write_json(path: str | Path, payload: dict[str, Any]) -> Path:
-    """Write ``payload`` as JSON through a temp file (never half-written)."""
-    target = Path(path)
-    target.parent.mkdir(parents=True, exist_ok=True)
-    text = json.dumps(_finite(payload), indent=2, allow_nan=False, default=_json_default) + "\n"
-    return write_atomically(target, lambda fh: fh.write(text))
-
-
-def _finite(obj: Any) -> Any:
-    """NaN and infinities become null (JSON has no NaN; a reader must not meet a bare NaN)."""
-    if isinstance(obj, float | np.floating):
-        return float(obj) if np.isfinite(obj) else None
-    if isinstance(obj, dict):
-        return {k: _finite(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_finite(v) for v in obj]
-    return obj
-
-
-def _json_default(obj: Any) -> Any:
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    raise TypeError(f"not JSON serialisable: {type(obj).__name__}")
 
 
 def _vehicle_for_speed(vehicle_id: str, speed_kmh: float) -> Any:
@@ -133,9 +105,9 @@ def _add_simulate(sub: argparse._SubParsersAction) -> None:
 
 
 def cmd_simulate(args: argparse.Namespace) -> dict[str, Any]:
+    from wsp_env.evaluation.runner import run_one, trace_metadata
+    from wsp_env.evaluation.trace_writer import SensorModel, sample_run, write_trace
     from wsp_env.policy import make_policy
-    from wsp_env.runner import run_one, trace_metadata
-    from wsp_env.trace_io import SensorModel, sample_run, write_trace
 
     vehicle = _vehicle_for_speed(args.vehicle, args.speed_kmh)
     rail = load_rail(args.rail, args.rails_config)  # a bad table or rail fails here, named
@@ -158,7 +130,7 @@ def cmd_simulate(args: argparse.Namespace) -> dict[str, Any]:
     }
     outputs = []
     if args.plot:
-        from wsp_env.plotting import plot_run
+        from wsp_env.evaluation.plotting import plot_run
 
         title = f"{vehicle.name}, {args.speed_kmh:g} km/h, {args.rail}, policy {policy.name}"
         outputs.append(plot_run(record, args.plot, title=title))
@@ -255,7 +227,7 @@ def cmd_evaluate(args: argparse.Namespace) -> dict[str, Any]:
         "summary": summary,
     }
     if args.report:
-        from wsp_env.report import write_report
+        from wsp_env.evaluation.report import write_report
 
         payload["report"] = str(
             write_report(args.report, suite, args.vehicle, results, summary, records)
@@ -379,7 +351,7 @@ def _add_bench(sub: argparse._SubParsersAction) -> None:
 
 
 def cmd_bench(args: argparse.Namespace) -> dict[str, Any]:
-    from wsp_env.bench import run_bench
+    from wsp_env.evaluation.bench import run_bench
 
     if args.repeats < 1:
         raise UserError("--repeats: must be >= 1")
@@ -387,7 +359,7 @@ def cmd_bench(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def _print_bench(result: dict[str, Any]) -> None:
-    from wsp_env.bench import format_bench
+    from wsp_env.evaluation.bench import format_bench
 
     print(format_bench(result))
 
@@ -420,7 +392,7 @@ def _add_train(sub: argparse._SubParsersAction) -> None:
 
 
 def cmd_train(args: argparse.Namespace) -> dict[str, Any]:
-    from wsp_env.training import train
+    from wsp_env.training.train import train
 
     if args.config is None and args.resume is None:
         raise UserError("--config: required unless --resume")
@@ -474,7 +446,7 @@ def _add_validate(sub: argparse._SubParsersAction) -> None:
 
 
 def cmd_validate(args: argparse.Namespace) -> dict[str, Any]:
-    from wsp_env.validate import run_validation
+    from wsp_env.validation.checks import run_validation
 
     return run_validation(args.report)
 
@@ -556,9 +528,9 @@ def _add_rig(sub: argparse._SubParsersAction) -> None:
 
 
 def cmd_rig(args: argparse.Namespace) -> dict[str, Any]:
-    from wsp_env.config import read_yaml
+    from wsp_env.core.config import read_yaml
     from wsp_env.policy import make_policy
-    from wsp_env.rig import RigConfig, plot_rig, rig_test
+    from wsp_env.rig.roller_rig import RigConfig, plot_rig, rig_test
 
     vehicle = _vehicle_for_speed(args.vehicle, args.speed_kmh)
     load_rail(args.rail, None)  # an unknown rail fails here, named
@@ -630,8 +602,8 @@ def _add_traction(sub: argparse._SubParsersAction) -> None:
 
 def cmd_traction(args: argparse.Namespace) -> dict[str, Any]:
     from wsp_env.baselines.antiskid import AntiSkid, AntiSkidConfig
-    from wsp_env.config import read_yaml
-    from wsp_env.traction import MU_HEAD, plot_traction, run_traction
+    from wsp_env.core.config import read_yaml
+    from wsp_env.rig.traction import MU_HEAD, plot_traction, run_traction
 
     vehicle = load_vehicle(args.vehicle)
     antiskid = None
@@ -680,7 +652,7 @@ def _add_export(sub: argparse._SubParsersAction) -> None:
 
 
 def cmd_export(args: argparse.Namespace) -> dict[str, Any]:
-    from wsp_env.export import export_onnx
+    from wsp_env.training.export import export_onnx
 
     return export_onnx(args.model, args.onnx)
 

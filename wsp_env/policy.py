@@ -18,7 +18,7 @@ class Policy(Protocol):
     privileged: bool  # True: needs privileged observations / simulator state
 
     def bind(self, core: Any) -> None:
-        """Attach to a ``_BrakingCore`` (spaces, scales; privileged policies may read state)."""
+        """Attach to a ``BrakingCore`` (spaces, scales; privileged policies may read state)."""
 
     def reset(self, env_ids: np.ndarray) -> None:
         """Environments ``env_ids`` start a new episode."""
@@ -188,7 +188,7 @@ def _algo_classes() -> dict[str, type]:
 
 def policy_metadata(config: dict[str, Any], name: str) -> dict[str, Any]:
     """What a model file must say about itself to be evaluated (``write_model_metadata``)."""
-    from wsp_env.config import ConfigError, load_vehicle
+    from wsp_env.core.config import ConfigError, load_vehicle
 
     env_kwargs = config.get("env_kwargs") or {}
     vehicle = env_kwargs.get("vehicle", "uic_z1")

@@ -36,7 +36,7 @@ from wsp_env.calibration.adhesion_estimate import (
 from wsp_env.calibration.discovery import Result
 from wsp_env.calibration.residuals import channels
 from wsp_env.calibration.traces import Trace
-from wsp_env.trace_io import replace_dir_atomically, write_atomically
+from wsp_env.files import replace_dir_atomically, write_atomically
 
 
 def scenario_options(result: Result) -> dict[str, Any]:

@@ -14,10 +14,10 @@ from typing import Any
 
 import numpy as np
 
-from wsp_env.config import RailConfig, VehicleConfig, load_vehicle
+from wsp_env.core.config import RailConfig, VehicleConfig, load_vehicle
+from wsp_env.evaluation.runner import run_one, trace_metadata
+from wsp_env.evaluation.trace_writer import SensorModel, sample_run, write_trace
 from wsp_env.policy import make_policy
-from wsp_env.runner import run_one, trace_metadata
-from wsp_env.trace_io import SensorModel, sample_run, write_trace
 
 
 def simulate_trace(
@@ -39,8 +39,9 @@ def simulate_trace(
     speed_scale_error: float = 0.0,
     speed_lag_s: float = 0.0,
     speed_ripple_kmh: float = 0.0,
+    return_record: bool = False,
     **case: Any,
-) -> tuple[Path, Path, dict[str, Any]]:
+) -> Any:
     """Simulate, sample and write ``STEM.csv`` + ``STEM.meta.json``; return paths and metrics.
 
     ``case`` fixes further scenario fields (``mu_contaminated``, ``pattern``,
@@ -51,7 +52,8 @@ def simulate_trace(
     ``resistance_scale``: true / nominal running resistance. ``height_scale``: true / nominal
     CoG and pivot heights (load transfer). ``pressure_lag_s``: the brake force lags the logged
     pressure. ``speed_scale_error`` / ``speed_lag_s``: the ground-speed sensor's scale error and
-    lag.
+    lag. ``return_record``: also return the simulator's own record of the stop (the truth the
+    trace was sampled from, adhesion forces included) as a fourth item.
     """
     nominal = vehicle if isinstance(vehicle, VehicleConfig) else load_vehicle(vehicle)
     veh = nominal
@@ -83,6 +85,7 @@ def simulate_trace(
     result, record = run_one(
         veh, "_synthetic", speed_kmh, make_policy(policy, wsp_config), seed, case, env_kwargs
     )
+    truth = record
     t = record.time_s
     if pressure_lag_s:  # the brake force follows the logged pressure pressure_lag_s later
         lead = np.stack([np.interp(t + pressure_lag_s, t, p) for p in record.p_cyl_bar.T], axis=1)
@@ -108,4 +111,6 @@ def simulate_trace(
         f"synthetic {nominal.id} {speed_kmh:g} km/h seed {seed}",
     )  # fmt: skip
     csv_path, meta_path = write_trace(stem, columns, meta)
+    if return_record:
+        return csv_path, meta_path, result, truth
     return csv_path, meta_path, result

@@ -27,7 +27,7 @@ import numpy as np
 import scipy.sparse as sparse
 from scipy.sparse.linalg import spsolve
 
-from wsp_env.trace_io import CONTAMINANTS, FORMAT
+from wsp_env.core.records import CONTAMINANTS, FORMAT
 
 MAX_GAP = 3  # samples: longer runs of missing values in a required column are an error
 MAX_SPEED_KMH = 500.0

@@ -1,5 +1,5 @@
 """Physics core: batched numerics compiled with numba (see the modules' docstrings)."""
 
-from wsp_env._jit_cache import refresh as _refresh_kernel_cache
+from wsp_env.physics.jit_cache import refresh as _refresh_kernel_cache
 
 _refresh_kernel_cache()

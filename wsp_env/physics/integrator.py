@@ -25,7 +25,7 @@ Equations (per environment ``e``, axle ``k``, substep ``dt``):
   axles see the rail the leading ones cleaned.
 
 ``step_batch`` advances all environments by ``n_sub`` substeps; environments at standstill are
-left untouched. Serial and ``prange`` (two-core) variants share ``_step_env``.
+left untouched. Serial and ``prange`` (two-core) variants share ``step_env``.
 """
 
 from __future__ import annotations
@@ -174,7 +174,7 @@ def _spell(axle_acc, e, k, current, longest, on, span):
 
 
 @njit(**KERNEL_FLAGS)
-def _step_env(
+def step_env(
     e,
     n_sub,
     dt,
@@ -429,18 +429,18 @@ def _step_env(
 ARG_ENV_PAR = 3  # position of env_par in the arguments of _step_serial / _step_parallel
 
 
-# The arguments of ``_step_env`` after ``e``; serial and ``prange`` variants are separate
+# The arguments of ``step_env`` after ``e``; serial and ``prange`` variants are separate
 # functions so that each gets its own cache entry.
 @njit(**KERNEL_FLAGS)
 def _step_serial(*args):
     for e in range(args[ARG_ENV_PAR].shape[0]):
-        _step_env(e, *args)
+        step_env(e, *args)
 
 
 @njit(parallel=True, **KERNEL_FLAGS)
 def _step_parallel(*args):
     for e in prange(args[ARG_ENV_PAR].shape[0]):
-        _step_env(e, *args)
+        step_env(e, *args)
 
 
 PARALLEL_MIN_ENVS = 64  # below this, thread start-up costs more than it saves

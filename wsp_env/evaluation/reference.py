@@ -33,7 +33,7 @@ import math
 import numpy as np
 from numba import njit
 
-from wsp_env.config import RailConfig, VehicleConfig
+from wsp_env.core.config import RailConfig, VehicleConfig
 from wsp_env.physics import layout as L
 from wsp_env.physics.adhesion import peak_adhesion
 from wsp_env.physics.brake import brake_torque, demand_bar, pad_factor
@@ -105,7 +105,7 @@ def dry_reference_distances(
     max_time_s: float = 600.0,
 ) -> np.ndarray:
     """Stopping distance (m) of each run's stop on dry rail, full demand on every axle."""
-    from wsp_env.simulator import TrainSim
+    from wsp_env.core.simulator import TrainSim
 
     sim = TrainSim(vehicle, n_envs=len(setups), dt_s=dt_s, control_period_s=control_period_s)
     for e, setup in enumerate(setups):

@@ -22,7 +22,7 @@ from typing import Any
 
 import yaml
 
-from wsp_env.trace_io import CONTAMINANTS  # the trace format's vocabulary of contaminants
+from wsp_env.core.records import CONTAMINANTS  # the trace format's vocabulary of contaminants
 
 
 class ConfigError(ValueError):
@@ -363,7 +363,7 @@ class RailConfig:
 # ---- file loading ---------------------------------------------------------------------------
 
 
-def _configs_root() -> Path:
+def configs_root() -> Path:
     """The built-in configs folder (``wsp_env.configs`` package, or ./configs in a checkout)."""
     try:
         return Path(str(resources.files("wsp_env.configs")))
@@ -390,9 +390,9 @@ def _resolve(name_or_path: str | Path, folder: str) -> Path:
         if not p.exists():
             raise ConfigError(f"{p}: no such file")
         return p
-    builtin = _configs_root() / folder / f"{name_or_path}.yaml"
+    builtin = configs_root() / folder / f"{name_or_path}.yaml"
     if not builtin.exists():
-        known = sorted(q.stem for q in (_configs_root() / folder).glob("*.yaml"))
+        known = sorted(q.stem for q in (configs_root() / folder).glob("*.yaml"))
         raise ConfigError(f"{folder}: unknown id {str(name_or_path)!r} (known: {', '.join(known)})")
     return builtin
 
@@ -408,7 +408,7 @@ def load_vehicle(name_or_path: str | Path) -> VehicleConfig:
 
 def load_rails(path: str | Path | None = None) -> dict[str, RailConfig]:
     """Load the rail-condition table (``configs/rails.yaml`` unless a path is given)."""
-    p = Path(path) if path is not None else _configs_root() / "rails.yaml"
+    p = Path(path) if path is not None else configs_root() / "rails.yaml"
     data = read_yaml(p)
     if not isinstance(data, dict):
         raise ConfigError(f"{p}: expected a mapping of rail conditions")

@@ -13,8 +13,9 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from wsp_env.plotting import plot_run
-from wsp_env.trace_io import RunRecord, replace_dir_atomically
+from wsp_env.core.records import RunRecord
+from wsp_env.evaluation.plotting import plot_run
+from wsp_env.files import replace_dir_atomically
 
 
 def _fmt(stats: dict[str, float], digits: int = 1) -> str:

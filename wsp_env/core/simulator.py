@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from wsp_env.config import RailConfig, VehicleConfig
+from wsp_env.core.config import RailConfig, VehicleConfig
 from wsp_env.physics import layout as L
 from wsp_env.physics.adhesion import LAW_NAMES, REC_BASIS_NAMES, tustin_second_order
 from wsp_env.physics.brake import decay_factor, demand_pressures

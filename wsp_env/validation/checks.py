@@ -45,31 +45,28 @@ from typing import Any
 
 import numpy as np
 
-from wsp_env.config import _configs_root, load_rail
-
-TABLE6 = np.array([[13.08, 13.36, 13.09, 13.52], [12.78, 12.06, 13.20, 13.43]])  # B1, B2
-TABLE6_STD = np.array([[6.45, 7.25, 5.92, 6.22], [6.58, 6.86, 5.63, 5.75]])
-TABLE7_M = 725.0  # m: mean of 727.53 (B1) and 722.65 (B2); the seed simulated 724.88
-TABLE4 = {  # seed 000 Table 4: mu0, K, K_rozv of axles 1-4 (ETR 1000, soap, 150 km/h)
-    "mu0": [0.1497, 0.1497, 0.1542, 0.1593],
-    "K": [30.00, 30.00, 29.99, 29.99],
-    "K_rozv": [0.0291, 0.0325, 0.0308, 0.0286],
-}
-SEED002_STOP_TOL = 0.05
-SEED002_SLIDE_TOL_KMH = 2.0
-SEED002_LOCK_MARGIN = 0.10  # none stops at least 10 % longer than the WSP at seed 002's test
-SEED000_MU0_TOL = 0.15
-SEED000_KROZV_FACTOR = 2.0
-# the ETR 1000 soap campaign of seed 000: its as-laid level (the seed gives only fitted mu0,
-# which recovery lifts above the as-laid level), speed, logger
-SEED000_LEVEL = 0.13
-SEED000_SPEED_KMH = 150.0
-SEED000_SAMPLE_S = 0.1
-SEED000_SPEED_NOISE_KMH = 0.05
-DRY_QUIET_TOL = 0.01
-OPEN_CHECKS: tuple[str, ...] = ()  # checks reported but kept out of the overall verdict
-RIG_STOP_TOL = 0.01
-RIG_E_OMEGA_RMS_KMH = 0.5
+from wsp_env.core.config import configs_root, load_rail
+from wsp_env.validation.targets import (
+    DRY_QUIET_TOL,
+    OPEN_CHECKS,
+    RIG_E_OMEGA_RMS_KMH,
+    RIG_STOP_TOL,
+    SEED000_KROZV_FACTOR,
+    SEED000_LEVEL,
+    SEED000_MU0_TOL,
+    SEED000_SAMPLE_S,
+    SEED000_SPEED_KMH,
+    SEED000_SPEED_NOISE_KMH,
+    SEED002_LOCK_MARGIN,
+    SEED002_SLIDE_TOL_KMH,
+    SEED002_STOP_TOL,
+    TABLE4,
+    TABLE6,
+    TABLE7_M,
+    TABLE9_KMH,
+    TABLE9_WIDEN_KMH,
+    TABLE10_M,
+)
 
 
 def seed002_check() -> dict[str, Any]:
@@ -79,7 +76,7 @@ def seed002_check() -> dict[str, Any]:
     from wsp_env.policy import NoWSP
 
     suite = load_suite("seed002_braking")
-    wsp = load_wsp_config(_configs_root() / "wsp" / "seed002_uic_z1.yaml")
+    wsp = load_wsp_config(configs_root() / "wsp" / "seed002_uic_z1.yaml")
     (run,), records = run_suite("uic_z1", suite, ClassicalWSP(wsp), record="all")
     (locked,), _ = run_suite("uic_z1", suite, NoWSP(), record="none")
     slide = [a["mean_sliding_kmh"] for a in run["axles"]]
@@ -109,7 +106,7 @@ def seed000_check(directory: Path | None = None) -> dict[str, Any]:
     from wsp_env.calibration.adhesion_estimate import estimate_adhesion, fit_polach
     from wsp_env.calibration.synthetic import simulate_trace
     from wsp_env.calibration.traces import read_trace
-    from wsp_env.trace_io import SensorModel
+    from wsp_env.evaluation.trace_writer import SensorModel
 
     sensors = SensorModel(
         sample_period_s=SEED000_SAMPLE_S,
@@ -212,10 +209,10 @@ def rig_check() -> dict[str, Any]:
     """Seed 002's braking test on the roller rig against the track alone (module docstring)."""
     from wsp_env.baselines.classical import ClassicalWSP, load_wsp_config
     from wsp_env.evaluation import load_suite
-    from wsp_env.rig import rig_test
+    from wsp_env.rig.roller_rig import rig_test
 
     (case,) = load_suite("seed002_braking").cases
-    wsp = load_wsp_config(_configs_root() / "wsp" / "seed002_uic_z1.yaml")
+    wsp = load_wsp_config(configs_root() / "wsp" / "seed002_uic_z1.yaml")
     fixed = {"mu_contaminated": case.mu_contaminated, "pattern": case.pattern,
              "load": case.load, "gradient_permille": case.gradient_permille}  # fmt: skip
     result = rig_test("uic_z1", ClassicalWSP(wsp), case.rail, float(case.speeds_kmh[0]), 0, fixed)
@@ -231,9 +228,42 @@ def rig_check() -> dict[str, Any]:
 
 
 def _traction_check() -> dict[str, Any]:
-    from wsp_env.traction import seed002_traction_check
-
     return {**seed002_traction_check(), "in_overall_verdict": "seed002_traction" not in OPEN_CHECKS}
+
+
+def seed002_traction_check(duration_s: float | None = None) -> dict[str, Any]:
+    """Tables 9-10: each axle's mean sliding inside T1-T2 widened by 0.5 km/h, axle 4 the
+    least sliding, and the distance at ``duration_s`` between T2 and T1."""
+    from wsp_env.rig.traction import DURATION_S, run_traction
+
+    duration_s = DURATION_S if duration_s is None else duration_s
+    run = run_traction(duration_s=duration_s * 1.1)
+    rec = run.record
+    distance = float(np.interp(duration_s, rec["time_s"], rec["x_m"]))
+    short = run_traction(duration_s=duration_s)  # the sliding means over the test itself
+    slide = np.array(short.summary["mean_sliding_kmh"])
+    lo = TABLE9_KMH.min(axis=0) - TABLE9_WIDEN_KMH
+    hi = TABLE9_KMH.max(axis=0) + TABLE9_WIDEN_KMH
+    inside = bool(np.all((slide >= lo) & (slide <= hi)))
+    axle4_least = bool(np.argmin(np.abs(slide)) == len(slide) - 1)
+    in_range = TABLE10_M[0] <= distance <= TABLE10_M[1]
+    return {
+        "mean_sliding_kmh": slide.tolist(),
+        "std_sliding_kmh": short.summary["std_sliding_kmh"],
+        "table9_envelope_kmh": [lo.tolist(), hi.tolist()],
+        "distance_m": distance,
+        "duration_s": duration_s,
+        "distance_at_18_22_s_m": [
+            float(np.interp(0.9 * duration_s, rec["time_s"], rec["x_m"])),
+            float(np.interp(1.1 * duration_s, rec["time_s"], rec["x_m"])),
+        ],
+        "table10_m": list(TABLE10_M),
+        "mean_sliding_inside": inside,
+        "axle4_least_sliding": axle4_least,
+        "distance_inside": in_range,
+        "passed": bool(inside and axle4_least and in_range),
+        "_record": short.record,
+    }
 
 
 def run_validation(report: str | Path | None = None) -> dict[str, Any]:
@@ -248,7 +278,7 @@ def run_validation(report: str | Path | None = None) -> dict[str, Any]:
             "seed002_traction": _traction_check(),
         }
     if report is not None:
-        from wsp_env.validate_report import write_validation_report
+        from wsp_env.validation.report import write_validation_report
 
         result["report"] = str(write_validation_report(report, result))
     out = {k: _public(v) for k, v in result.items()}

@@ -45,21 +45,17 @@ from typing import Any
 import numpy as np
 
 from wsp_env.baselines.antiskid import AntiSkid, AntiSkidConfig
-from wsp_env.config import (
+from wsp_env.core.config import (
     VehicleConfig,
-    _configs_root,
+    configs_root,
     from_dict,
     load_rails,
     load_vehicle,
     read_yaml,
 )
+from wsp_env.core.simulator import RunSetup, TrainSim
 from wsp_env.physics import layout as L
-from wsp_env.simulator import RunSetup, TrainSim
 
-TABLE9_KMH = np.array([[-1.44, -0.99, -1.49, -0.34], [-2.59, -1.23, -1.37, -0.29]])  # T1, T2
-TABLE9_STD_KMH = np.array([[1.21, 0.48, 0.69, 0.10], [0.96, 0.86, 0.88, 0.24]])
-TABLE10_M = (159.64, 225.57)  # T2, T1
-TABLE9_WIDEN_KMH = 0.5
 DURATION_S = 20.0
 MU_C = 0.09  # Table 8
 R_HEAD = 0.1497 / 0.1593  # seed 000 Table 4: mu0 of axle 1 / axle 4 on soap (seed 002 Fig. 8's R_1)
@@ -87,7 +83,7 @@ def seed002_rail() -> Any:
 
 def seed002_antiskid() -> AntiSkid:
     """The E402B device with the thresholds of ``configs/antiskid/e402b_seed002.yaml``."""
-    path = _configs_root() / ANTISKID_CONFIG
+    path = configs_root() / ANTISKID_CONFIG
     return AntiSkid(from_dict(AntiSkidConfig, read_yaml(path) or {}, str(path)))
 
 
@@ -172,38 +168,6 @@ def _row(sim: TrainSim, torque: np.ndarray) -> np.ndarray:
     )  # fmt: skip
 
 
-def seed002_traction_check(duration_s: float = DURATION_S) -> dict[str, Any]:
-    """Tables 9-10: each axle's mean sliding inside T1-T2 widened by 0.5 km/h, axle 4 the
-    least sliding, and the distance at ``duration_s`` between T2 and T1."""
-    run = run_traction(duration_s=duration_s * 1.1)
-    rec = run.record
-    distance = float(np.interp(duration_s, rec["time_s"], rec["x_m"]))
-    short = run_traction(duration_s=duration_s)  # the sliding means over the test itself
-    slide = np.array(short.summary["mean_sliding_kmh"])
-    lo = TABLE9_KMH.min(axis=0) - TABLE9_WIDEN_KMH
-    hi = TABLE9_KMH.max(axis=0) + TABLE9_WIDEN_KMH
-    inside = bool(np.all((slide >= lo) & (slide <= hi)))
-    axle4_least = bool(np.argmin(np.abs(slide)) == len(slide) - 1)
-    in_range = TABLE10_M[0] <= distance <= TABLE10_M[1]
-    return {
-        "mean_sliding_kmh": slide.tolist(),
-        "std_sliding_kmh": short.summary["std_sliding_kmh"],
-        "table9_envelope_kmh": [lo.tolist(), hi.tolist()],
-        "distance_m": distance,
-        "duration_s": duration_s,
-        "distance_at_18_22_s_m": [
-            float(np.interp(0.9 * duration_s, rec["time_s"], rec["x_m"])),
-            float(np.interp(1.1 * duration_s, rec["time_s"], rec["x_m"])),
-        ],
-        "table10_m": list(TABLE10_M),
-        "mean_sliding_inside": inside,
-        "axle4_least_sliding": axle4_least,
-        "distance_inside": in_range,
-        "passed": bool(inside and axle4_least and in_range),
-        "_record": short.record,
-    }
-
-
 def plot_traction(run: TractionRun, path: str) -> None:
     """Seed 002 Figs. 23 and 28-30 for one start: speeds, torques, adhesion coefficients."""
     import matplotlib
@@ -229,4 +193,4 @@ def plot_traction(run: TractionRun, path: str) -> None:
     plt.close(fig)
 
 
-__all__ = ["AntiSkid", "AntiSkidConfig", "run_traction", "seed002_traction_check"]
+__all__ = ["AntiSkid", "AntiSkidConfig", "run_traction"]

@@ -56,12 +56,11 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from gymnasium.utils import seeding
 from numba import njit
 
-from wsp_env import env_kernel as K
-from wsp_env.config import ConfigError, VehicleConfig, from_dict, load_vehicle
-from wsp_env.evaluation import CaseConfig, SuiteConfig, expand
+from wsp_env.core.config import ConfigError, VehicleConfig, from_dict, load_vehicle
+from wsp_env.evaluation.runner import one_run
+from wsp_env.evaluation.suites import expand
 from wsp_env.physics import layout as L
 from wsp_env.physics.brake import (
     brake_torque,
@@ -72,8 +71,7 @@ from wsp_env.physics.brake import (
     valve_target,
 )
 from wsp_env.physics.contact import kalker_longitudinal_stiffness_N
-from wsp_env.physics.integrator import INV_P_ATM, _step_env
-from wsp_env.runner import NOMINAL_SCENARIO
+from wsp_env.physics.integrator import INV_P_ATM, step_env
 
 KMH = 1.0 / 3.6
 
@@ -311,7 +309,7 @@ def hil_period(
         acc[0, 6] = max(acc[0, 6], abs(body[0]))
         for k in range(na):
             axle_state[0, k, L.AS_EXT_TORQUE] = est[k, E_CHAT]
-        _step_env(0, 1, ctrl, dummy_cmd, env_par, axle_par, sections, env_state, axle_state,
+        step_env(0, 1, ctrl, dummy_cmd, env_par, axle_par, sections, env_state, axle_state,
                   field, env_acc, axle_acc)  # fmt: skip
     return n_ctrl, n_rec
 
@@ -350,29 +348,16 @@ class RollerRig:
         """A braking test from ``speed_kmh`` on the virtual rail ``rail`` with ``policy``
         (anything ``evaluate`` runs); the scenario is drawn as ``runner.run_one`` draws it, so
         the same call there gives the virtual track's own stop."""
-        from wsp_env.env import _BrakingCore
+        from wsp_env.core.braking import BrakingCore
 
         cfg, veh = self.cfg, self.vehicle
-        suite = SuiteConfig(
-            name="rig",
-            description="",
-            seeds=(seed,),
-            cases=(
-                CaseConfig(name="run", rail=rail, speeds_kmh=(str(speed_kmh),), **(case or {})),
-            ),
-        )
+        suite, kwargs = one_run(rail, speed_kmh, seed, case, env_kwargs, name="rig")
         (run,) = expand(suite, veh)
-        kwargs = {**(env_kwargs or {}), **getattr(policy, "env_kwargs", {})}
-        kwargs["scenario"] = {
-            "rails": {rail: 1.0},
-            **NOMINAL_SCENARIO,
-            **kwargs.get("scenario", {}),
-        }
+        kwargs.update(getattr(policy, "env_kwargs", {}))
         kwargs.setdefault("max_time_s", max_time_s)
         kwargs.setdefault("substep_s", cfg.control_period_s)  # the virtual vehicle's step
-        core = _BrakingCore(1, vehicle=veh, **kwargs)
-        core.rngs[0] = seeding.np_random(run.seed)[0]
-        core.reset_env(0, run.options)
+        core = BrakingCore(1, vehicle=veh, **kwargs)
+        core.reset_env(0, run.options, seed=run.seed)
         policy.bind(core)
         policy.reset(np.array([0]))
         sim = core.sim
@@ -419,40 +404,20 @@ class RollerRig:
         max_time = kwargs["max_time_s"]
         record = np.zeros((int(max_time / (rec_every * ctrl)) + 2, N_REC_BASE + 9 * na))
         n_rec = 0
-        prev_wheel = omega * r
         v_period_start = v0
         cmd = np.ones(na)
         wall = time.perf_counter()
         step = 0
         while step * ctrl < max_time:
             # --- the vehicle's WSP, every BCU cycle, from the rig wheels' own speeds ---------
-            if step > 0:
-                # an accelerometer-aided WSP reads the virtual vehicle's deceleration over the
-                # period, as the env's kernel gives it (HIL: the rig feeds the vehicle's sensors)
-                decel = (v_period_start - float(sim.speed_mps[0])) / sim.control_period_s
-                K.update_reference(
-                    0, core.wsp, float(np.max(omega * r)), decel, ep, core.obs_par,
-                    sim.control_period_s,
-                )  # fmt: skip
-            state = sim.axle_state.copy()
-            state[0, :, L.AS_OMEGA] = omega
-            state[0, :, L.AS_P] = pressure
-            K.write_obs(
-                0, ep, ap, sim.env_state, state, core.wsp, prev_wheel[None, :],
-                core.prev_action, core.obs_par, sim.control_period_s, core._kobs,
-            )  # fmt: skip
-            if core.base is not None:
-                core._base_stale = True
-            prev_wheel = omega * r
+            # an accelerometer-aided WSP reads the virtual vehicle's deceleration over the
+            # period, as the env's kernel gives it (HIL: the rig feeds the vehicle's sensors)
+            decel = (v_period_start - float(sim.speed_mps[0])) / sim.control_period_s
+            core.observe_external(0, omega * r, pressure, decel if step > 0 else None)
             v_period_start = float(sim.speed_mps[0])
             action = core.check_actions(policy.act(core.obs))
             cmd_prev = cmd
-            cmd = core.valve_commands(action)[0]
-            # the previous valve action, as the kernel keeps it for the observation
-            if core.mode == K.MODE_CONTINUOUS:
-                core.prev_action[0] = np.clip(core.compose(action)[0][0], -1.0, 1.0)
-            else:
-                core.prev_action[0] = np.asarray(action, dtype=float)[0] - 1.0
+            cmd = core.act_external(0, action)
             noise_r = rng.normal(0.0, sigma_roller, (per_wsp, na)) if sigma_roller > 0 else (
                 np.zeros((per_wsp, na)))  # fmt: skip
             noise_f = rng.normal(0.0, cfg.force_noise_N, (per_wsp, na)) if (
@@ -541,8 +506,8 @@ def rig_test(
     """A braking test on the rig and, for the same policy and scenario, on the virtual track
     alone (``runner.run_one``: the evaluation's code path): the rig indices and the comparison.
     ``policy``: a policy object or a name / model path (``policy.make_policy``)."""
+    from wsp_env.evaluation.runner import run_one
     from wsp_env.policy import make_policy
-    from wsp_env.runner import run_one
 
     make = (lambda: make_policy(policy)) if isinstance(policy, str) else (lambda: policy)
     bench = RollerRig(vehicle, rig)

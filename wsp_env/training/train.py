@@ -51,7 +51,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from wsp_env.config import ConfigError, _configs_root, read_yaml
+from wsp_env.core.config import ConfigError, configs_root, read_yaml
 
 ALGO_NAMES = ("ppo", "sac", "td3", "a2c", "recurrent_ppo", "tqc")  # the last two: sb3-contrib
 OFF_POLICY = ("sac", "td3", "tqc")
@@ -190,7 +190,7 @@ def load_train_config(path: str | Path) -> TrainConfig:
     """Read and check a training config; errors name the file and the field."""
     p = Path(path)
     if p.suffix not in (".yaml", ".yml") and not p.exists():
-        p = _configs_root() / "train" / f"{path}.yaml"
+        p = configs_root() / "train" / f"{path}.yaml"
     if not p.exists():
         raise ConfigError(f"{path}: no such training config")
     data = read_yaml(p)
@@ -201,7 +201,7 @@ def load_train_config(path: str | Path) -> TrainConfig:
 
 
 def parse_train_config(data: Any, source: str = "") -> TrainConfig:
-    from wsp_env.config import from_dict
+    from wsp_env.core.config import from_dict
 
     if not isinstance(data, dict):
         raise ConfigError("(top level): expected a mapping")
@@ -256,7 +256,7 @@ def parse_train_config(data: Any, source: str = "") -> TrainConfig:
     eval_cfg = from_dict(EvalConfig, data.pop("eval", {}) or {}, "eval")
     pretrain_cfg = None
     if data.get("pretrain") is not None:
-        from wsp_env.imitation import PretrainConfig
+        from wsp_env.training.imitation import PretrainConfig
 
         pretrain_cfg = from_dict(PretrainConfig, data.pop("pretrain"), "pretrain")
         if pretrain_cfg.steps_per_round < n_envs:
@@ -330,10 +330,10 @@ def _is_net_arch(v: Any) -> bool:
 
 def check_env_kwargs(env_kwargs: dict[str, Any]) -> None:
     """Build one environment from ``env_kwargs``: every field checked by the environment."""
-    from wsp_env.env import _BrakingCore
+    from wsp_env.core.braking import BrakingCore
 
     try:
-        _BrakingCore(1, **env_kwargs)
+        BrakingCore(1, **env_kwargs)
     except ConfigError as err:
         raise ConfigError(f"env_kwargs.{err}") from None
     except (ValueError, TypeError) as err:
@@ -387,7 +387,7 @@ def _wrap_frame_stack(cfg: TrainConfig, env: Any) -> Any:
 
 
 def _braking_core(env: Any) -> Any:
-    """The ``_BrakingCore`` under an SB3 env (through VecNormalize if any)."""
+    """The ``BrakingCore`` under an SB3 env (through VecNormalize if any)."""
     while not hasattr(env, "venv") or not hasattr(env.venv, "core"):
         env = env.venv
     return env.venv.core
@@ -587,7 +587,7 @@ class Validator:
                 logger.record(f"validation/{k}", row[k])
         payload = {"suite": self.suite.name, "classical": self.classical,
                    "history": self.history, "best": self.best}  # fmt: skip
-        from wsp_env.cli import write_json
+        from wsp_env.files import write_json
 
         write_json(self.out / "validation.json", payload)
         return row
@@ -703,8 +703,8 @@ def train(
     pretrained = None
     try:
         if resume is None and cfg.pretrain is not None:
-            from wsp_env.cli import write_json
-            from wsp_env.imitation import pretrain
+            from wsp_env.files import write_json
+            from wsp_env.training.imitation import pretrain
 
             gamma = float(cfg.hyperparams.get("gamma", 0.99))
             t0 = time.perf_counter()
@@ -748,7 +748,7 @@ def train(
         if pretrained is not None:
             result["pretrain_env_steps"] = pretrained["env_steps"]
             result["pretrain_wall_time_s"] = pretrained["wall_time_s"]
-        from wsp_env.cli import write_json
+        from wsp_env.files import write_json
 
         write_json(out / "train.json", result)
         return result
@@ -776,7 +776,7 @@ def _merge_progress(out: Path) -> None:
             reader = csv.DictReader(fh)
             names.update(dict.fromkeys(reader.fieldnames or ()))
             rows.extend(reader)
-    from wsp_env.trace_io import write_atomically
+    from wsp_env.files import write_atomically
 
     def write(fh: Any) -> None:
         w = csv.DictWriter(fh, fieldnames=list(names))

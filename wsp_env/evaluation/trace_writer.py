@@ -1,32 +1,26 @@
-"""Writing (and strict basic reading) of ``wsp-trace/1`` braking traces.
+"""Writing ``wsp-trace/1`` braking traces.
 
 A trace is ``STEM.csv`` (samples, header line first) plus ``STEM.meta.json`` (test and nominal
 vehicle data); the format is specified in ``docs/trace_format.md``. This module turns a
 simulated run (:class:`RunRecord`, recorded at the control period) into logger-like samples
 (:func:`sample_run`, with a :class:`SensorModel` for period, jitter, noise and quantisation) and
-writes them atomically (:func:`write_trace`). :func:`read_trace_basic` is a deliberately small,
-strict reader for round trips; it does not know vendor aliases and does not fill gaps.
+writes them atomically (:func:`write_trace`). The one reader is the calibration's
+(``calibration.traces.read_trace``).
 """
 
 from __future__ import annotations
 
-import contextlib
-import csv
 import json
 import math
-import os
 import re
-import shutil
-import tempfile
-from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import IO, Any
+from typing import IO
 
 import numpy as np
 
-FORMAT = "wsp-trace/1"
-CONTAMINANTS = ("dry", "wet", "soap", "oil", "leaves", "unknown")
+from wsp_env.core.records import CONTAMINANTS, FORMAT, RunRecord
+from wsp_env.files import json_default, write_all_atomically
 
 _AXLE_SPEED = re.compile(r"^v_axle_(\d+)_kmh$")
 _AXLE_PRESSURE = re.compile(r"^p_cyl_(\d+)_bar$")
@@ -42,61 +36,6 @@ _JITTER_MAX = 0.25
 # --------------------------------------------------------------------------------------------
 # Records and sensors
 # --------------------------------------------------------------------------------------------
-
-
-@dataclass
-class RunRecord:
-    """A simulated run recorded at the control period (uniform time grid).
-
-    Speeds in km/h (axle speed is the peripheral speed ``omega * r_nominal``), pressures in bar
-    (gauge), ``a_train_mps2`` positive when slowing; see ``docs/trace_format.md`` for the channels.
-    """
-
-    time_s: np.ndarray  # (T,)
-    v_train_kmh: np.ndarray  # (T,)
-    v_axle_kmh: np.ndarray  # (T, n_axles)
-    p_cyl_bar: np.ndarray  # (T, n_axles)
-    p_demand_bar: np.ndarray  # (T,)
-    a_train_mps2: np.ndarray  # (T,)
-    v_ref_kmh: np.ndarray | None = None  # (T,)
-    wsp_active: np.ndarray | None = None  # (T, n_axles) bool
-
-    def __post_init__(self) -> None:
-        self.time_s = np.asarray(self.time_s, dtype=float)
-        if self.time_s.ndim != 1 or self.time_s.size < 2:
-            raise ValueError("time_s: must be a 1-D array with at least 2 samples")
-        if not np.all(np.isfinite(self.time_s)) or np.any(np.diff(self.time_s) <= 0):
-            raise ValueError("time_s: must be finite and strictly increasing")
-        T = self.time_s.size
-        for name in ("v_train_kmh", "p_demand_bar", "a_train_mps2", "v_ref_kmh"):
-            value = getattr(self, name)
-            if value is None:
-                if name != "v_ref_kmh":
-                    raise ValueError(f"{name}: required")
-                continue
-            arr = np.asarray(value, dtype=float)
-            if arr.shape != (T,):
-                raise ValueError(f"{name}: shape {arr.shape}, expected ({T},)")
-            setattr(self, name, arr)
-        v_axle = np.asarray(self.v_axle_kmh, dtype=float)
-        if v_axle.ndim != 2 or v_axle.shape[0] != T or v_axle.shape[1] < 1:
-            raise ValueError(f"v_axle_kmh: shape {v_axle.shape}, expected ({T}, n_axles)")
-        self.v_axle_kmh = v_axle
-        n = v_axle.shape[1]
-        p_cyl = np.asarray(self.p_cyl_bar, dtype=float)
-        if p_cyl.shape != (T, n):
-            raise ValueError(f"p_cyl_bar: shape {p_cyl.shape}, expected ({T}, {n})")
-        self.p_cyl_bar = p_cyl
-        if self.wsp_active is not None:
-            active = np.asarray(self.wsp_active)
-            if active.shape != (T, n):
-                raise ValueError(f"wsp_active: shape {active.shape}, expected ({T}, {n})")
-            self.wsp_active = active.astype(bool)
-
-    @property
-    def n_axles(self) -> int:
-        """Number of axles (columns of ``v_axle_kmh``)."""
-        return int(self.v_axle_kmh.shape[1])
 
 
 @dataclass
@@ -242,10 +181,6 @@ def _stem_path(stem: str | Path) -> Path:
     return path
 
 
-def _meta_path(csv_path: Path) -> Path:
-    return _stem_path(csv_path).with_name(_stem_path(csv_path).name + ".meta.json")
-
-
 def _positive_number(meta: dict, key: str, label: str) -> None:
     if key not in meta:
         raise ValueError(f"{label}: required field missing from the metadata")
@@ -341,78 +276,6 @@ def _format_column(arr: np.ndarray) -> np.ndarray:
     return text
 
 
-def _json_default(obj: Any) -> Any:
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, Path):
-        return str(obj)
-    raise TypeError(f"metadata value of type {type(obj).__name__} is not JSON serialisable")
-
-
-def _current_umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
-
-
-_UMASK = _current_umask()
-
-
-def _write_temp(target: Path, write: Callable[[IO[Any]], None], binary: bool = False) -> Path:
-    """Write through ``write`` into a temp file next to ``target``; return the temp path.
-
-    The temp file is removed if ``write`` fails.
-    """
-    fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
-    tmp_path = Path(tmp)
-    os.chmod(tmp_path, 0o666 & ~_UMASK)  # mkstemp makes 0600; outputs get the usual mode
-    try:
-        fh_ctx = os.fdopen(fd, "wb") if binary else os.fdopen(fd, "w", encoding="utf-8", newline="")
-        with fh_ctx as fh:
-            write(fh)
-            fh.flush()
-            os.fsync(fh.fileno())
-    except BaseException:
-        with contextlib.suppress(OSError):
-            tmp_path.unlink()
-        raise
-    return tmp_path
-
-
-def write_atomically(target: Path, write: Callable[[IO[Any]], None], binary: bool = False) -> Path:
-    """Write ``target`` via a temp file in the same directory and ``os.replace``."""
-    tmp = _write_temp(target, write, binary)
-    try:
-        os.replace(tmp, target)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            tmp.unlink()
-        raise
-    return target
-
-
-def replace_dir_atomically(target: str | Path, build: Callable[[Path], None]) -> Path:
-    """Build a report folder through ``build(tmp)`` in a temp folder beside ``target``, then
-    swap it in: an interrupted run never leaves a half-written folder. An existing ``target``
-    is replaced only if it is empty or holds a ``report.md`` (an earlier report)."""
-    target = Path(target)
-    if target.exists() and any(target.iterdir()) and not (target / "report.md").exists():
-        raise ValueError(f"{target}: exists and is not a wsp-env report folder; not overwriting")
-    target.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent))
-    try:
-        build(tmp)
-        if target.exists():
-            shutil.rmtree(target)
-        os.replace(tmp, target)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-    return target
-
-
 def write_trace(stem: str | Path, columns: dict[str, np.ndarray], meta: dict) -> tuple[Path, Path]:
     """Write ``STEM.csv`` and ``STEM.meta.json`` (``docs/trace_format.md``); return their paths.
 
@@ -431,7 +294,7 @@ def write_trace(stem: str | Path, columns: dict[str, np.ndarray], meta: dict) ->
     n_axles = _validate_meta(meta)
     arrays = _validate_columns(columns, n_axles)
     try:  # fail before writing anything
-        json.dumps(meta, default=_json_default, allow_nan=False)
+        json.dumps(meta, default=json_default, allow_nan=False)
     except (TypeError, ValueError) as exc:
         raise ValueError(f"meta: not JSON serialisable ({exc})") from None
 
@@ -447,90 +310,12 @@ def write_trace(stem: str | Path, columns: dict[str, np.ndarray], meta: dict) ->
         fh.writelines(",".join(row) + "\n" for row in rows.tolist())
 
     def write_meta(fh: IO[str]) -> None:
-        json.dump(meta, fh, indent=2, default=_json_default, allow_nan=False)
+        json.dump(meta, fh, indent=2, default=json_default, allow_nan=False)
         fh.write("\n")
 
     csv_path = stem.with_name(stem.name + ".csv")
     meta_path = stem.with_name(stem.name + ".meta.json")
     csv_path.parent.mkdir(parents=True, exist_ok=True)
 
-    csv_tmp = _write_temp(csv_path, write_csv)
-    try:
-        meta_tmp = _write_temp(meta_path, write_meta)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            csv_tmp.unlink()
-        raise
-    try:
-        os.replace(csv_tmp, csv_path)
-    except BaseException:
-        for tmp in (csv_tmp, meta_tmp):
-            with contextlib.suppress(OSError):
-                tmp.unlink()
-        raise
-    try:
-        os.replace(meta_tmp, meta_path)
-    except BaseException:
-        for path in (meta_tmp, csv_path):
-            with contextlib.suppress(OSError):
-                path.unlink()
-        raise
+    write_all_atomically([(csv_path, write_csv), (meta_path, write_meta)])
     return csv_path, meta_path
-
-
-# --------------------------------------------------------------------------------------------
-# Basic reading
-# --------------------------------------------------------------------------------------------
-
-
-def read_trace_basic(csv_path: str | Path) -> tuple[dict[str, np.ndarray], dict]:
-    """Read ``STEM.csv`` and ``STEM.meta.json`` strictly (``docs/trace_format.md``), round trips.
-
-    Every column comes back as ``float64`` (empty cells are NaN; 0/1 flags are 0.0/1.0), in file
-    order. No vendor aliases, no gap filling: a malformed file raises ``ValueError`` naming the
-    file and the column or field.
-    """
-    csv_path = Path(csv_path)
-    meta_path = _meta_path(csv_path)
-    try:
-        with open(meta_path, encoding="utf-8") as fh:
-            meta = json.load(fh)
-    except FileNotFoundError:
-        raise ValueError(f"{meta_path}: metadata file not found") from None
-    except json.JSONDecodeError as exc:
-        raise ValueError(f"{meta_path}: invalid JSON ({exc})") from None
-    if not isinstance(meta, dict):
-        raise ValueError(f"{meta_path}: metadata must be a JSON object")
-    try:
-        n_axles = _validate_meta(meta)
-    except ValueError as exc:
-        raise ValueError(f"{meta_path}: {exc}") from None
-
-    with open(csv_path, encoding="utf-8", newline="") as fh:
-        reader = csv.reader(fh)
-        header = next(reader, None)
-        if not header:
-            raise ValueError(f"{csv_path}: empty file, no header line")
-        if len(set(header)) != len(header):
-            raise ValueError(f"{csv_path}: duplicate column names in the header")
-        values: list[list[float]] = [[] for _ in header]
-        for line_no, row in enumerate(reader, start=2):
-            if len(row) != len(header):
-                raise ValueError(
-                    f"{csv_path}: line {line_no} has {len(row)} fields, header has {len(header)}"
-                )
-            for j, cell in enumerate(row):
-                cell = cell.strip()
-                try:
-                    values[j].append(float(cell) if cell else math.nan)
-                except ValueError:
-                    raise ValueError(
-                        f"{csv_path}: column {header[j]}: non-numeric value {cell!r} "
-                        f"on line {line_no}"
-                    ) from None
-    columns = {name: np.asarray(col, dtype=float) for name, col in zip(header, values, strict=True)}
-    try:
-        _validate_columns(columns, n_axles)
-    except ValueError as exc:
-        raise ValueError(f"{csv_path}: {exc}") from None
-    return columns, meta

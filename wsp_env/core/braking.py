@@ -1,96 +1,31 @@
-"""``WSPBraking-v0``: wheel slide protection as a Gymnasium environment (single and native vector).
+"""The braking core: the one way anything steps a stop (environments, evaluation, training's
+validation, the roller rig, the scripts).
 
-A train brakes from ``speed_kmh`` to standstill on a rail drawn at ``reset`` (contaminant,
-adhesion level and pattern, load, pad friction, gradient, demand). Every control period
-(20 ms, the BCU cycle) the agent sets each WSP valve; the physics runs 1 ms substeps inside.
+:class:`BrakingCore` holds ``n_envs`` stops side by side: a :class:`~wsp_env.core.kernel.Params`
+bundle (what each stop is: vehicle, rail, scenario, observation and reward settings; fixed from
+``reset`` to the stop) and a :class:`~wsp_env.core.kernel.State` bundle (what evolves: the
+physics, the WSP's reference speed, the observation, reward terms and flags), stepped together
+by one compiled call (``core.kernel``). It offers what its users need: ``reset_env`` with
+options (and a seed), ``step``, ``ended`` and ``freeze`` for finished runs, a :class:`Recorder`
+for a run's rows, ``observe_external`` / ``act_external`` for a vehicle outside the kernel (the
+rig), and ``state_dict`` for checkpoints. Nothing outside it indexes its arrays by column.
 
-**Action** — ``action_mode="continuous"`` (default): ``Box(-1, 1, (n_valves,), float32)``; valve
-``j`` asks for the fraction ``(a_j + 1) / 2`` of the current demand pressure (the pneumatics
-decide how fast the cylinder gets there; nothing can exceed the demand). Out-of-range values are
-clipped and counted in ``info["action_clipped"]``; a NaN raises ``ValueError``.
-``action_mode="discrete"``: ``MultiDiscrete([3] * n_valves)`` with 0 = vent, 1 = hold,
-2 = fill (apply), like real dump/hold valves. ``action_mode="residual"``: a residual on the
-frozen classical WSP (``configs/wsp/classical.yaml``), which runs inside the environment on the
-same observation: ``Box(-1, 1, (n_valves,))``, valve ``j`` asks for the fraction
-``clip(f_j + residual_scale * a_j, 0, 1)`` of the demand, ``f_j`` the classical WSP's own
-request — so the zero action *is* the classical WSP, and a learner starts from it.
-``residual_deadband`` (0 by default) zeroes residuals up to that size and rescales the rest
-continuously (``sign(a) (|a| - band) / (1 - band)``): a policy's small, ever-changing outputs
-would otherwise move every *hold* a little, and each small drop of the target vents air.
-Valves are per axle, or per bogie with ``valve_group="bogie"``.
-
-**Observation** — ``Box(-5, 5, float32)``, what a WSP measures, normalised (``v_s`` = vehicle
-maximum speed): per axle the wheel speed ``/ v_s``, the wheel deceleration ``/ 10 m/s^2``, the
-slip against the reference speed ``(v_ref - v_i) / max(v_ref, 1 m/s)``, the cylinder pressure
-``/ p_max``; then the demand ``/ p_max``, the reference speed ``/ v_s`` (fastest wheel, falling
-at most 2.5 m/s^2 — above any dry-rail deceleration, so it is the train speed on good adhesion),
-and the previous valve command. ``privileged=True`` appends the true train speed, each
-axle's friction level and true creepage. ``accelerometer=True`` gives the WSP a body
-accelerometer, as accelerometer-aided WSPs have: the reference speed then falls at the
-deceleration it reads over each period — a specific force, so the gradient's ``g sin(theta)``
-is missing from it, plus a bias drawn per episode within ``+-accelerometer_bias_mps2``
-(0.05 m/s^2) — instead of the fixed limit, and the reading ``/ 10 m/s^2`` is appended to the
-observation. With it the reference follows the train when every wheel slides. With
-``action_mode="residual"`` the classical WSP's requests for this period (one per valve, as
-actions in ``[-1, 1]``) come last of all.
-
-**Reward** — minus the stop's cost in metres of stopping distance, divided by
-``distance_scale_m`` (100 m); the terms, each in ``info["reward_terms"]``, and their exchange
-rates (``reward``, ``RewardConfig``):
-
-* ``distance``  ``-dx``: over an episode it sums to ``-stopping_distance / distance_scale_m``;
-* ``damage``    wheel damage, priced per axle and superlinearly: axle ``i`` with cumulative
-  sliding energy ``E_i`` costs ``damage_m_per_MJ E_i (1 + E_i / damage_ref_MJ)`` metres
-  (20 m per MJ, doubled at 1 MJ), so a slide concentrated on one wheel costs more than the same
-  energy spread over four;
-* ``lock``      ``lock_m_per_s`` (10 m) per second each axle is locked (a wheel flat);
-* ``air``       ``air_m_per_100l`` (5 m) per 100 free-air litres vented;
-* ``shaping``   a training option, off by default (``shaping_decel_mps2 = 0``): potential-based
-  shaping ``gamma Phi(V') - Phi(V)`` with ``Phi(V) = -V^2 / (2 a0)``, the distance the train
-  would still run at ``a0``, and ``gamma = shaping_gamma`` (set it to the learner's discount).
-  It pays now for the speed a harder brake takes off, which the distance term only pays as the
-  metres are not run, and by Ng, Harada & Russell (1999) leaves the optimal policy unchanged:
-  its *discounted* sum over a stop is exactly ``V0^2 / (2 a0)``, a constant of the scenario
-  (the undiscounted sum is not: with gamma < 1 it grows with the stop's length, so logged
-  episode returns with shaping on are not comparable with returns without it). It reads the
-  true train speed: a reward-only privilege (observations are unchanged);
-* ``slide``     an option, off by default (``slide_m_per_s = 0``): metres per second each axle
-  slides deeper than the slide threshold ``max(3 km/h, 20 % V)`` — the time the damage
-  criterion "longest slide" judges, which the sliding energy alone does not price.
-
-With these defaults the classical WSP's return is about nine tenths distance; a locked-wheel
-policy (``none``) and one that brakes less than the demand return clearly less on soap and
-leaves (``tests/test_reward.py``). The episodic sum is what the weights price: every term is
-paid when it happens and a stop lasts 10-90 s (500-4500 steps), so train with a discount whose
-horizon covers a stop (gamma >= 0.999: ~20 s) — with gamma 0.99 (2 s) the distance a harder
-brake saves later is invisible to the step that applies it.
-
-**Episodes** — ``terminated`` at standstill, ``truncated`` when ``max_time_s`` of braking has
-passed. ``info["metrics"]`` at the end carries the run's metrics (``metrics.run_metrics``).
-``reset(options=...)`` fixes any drawn parameter (``speed_kmh``, ``rail``, ``mu_contaminated``,
-``pattern``, ``load_factor``, ``pad_factor``, ``gradient_permille``, ``demand``, ``sections``,
-``axle_mu_factor``, ``recovery_basis``).
-
-The vector class steps all environments in one compiled call and autoresets in the same step
-(``AutoresetMode.SAME_STEP``): an ended environment's last observation and info are in
-``info["final_obs"]`` / ``info["final_info"]`` (masks ``_final_obs`` / ``_final_info``).
+The Gymnasium classes over it are in ``wsp_env.envs``; the observation, action and reward it
+implements are documented there (``WSPBrakingEnv``'s docstring).
 """
 
 from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from typing import Any
 
-import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 from gymnasium.utils import seeding
-from gymnasium.vector import AutoresetMode, VectorEnv
-from gymnasium.vector.utils import batch_space
 
-from wsp_env import env_kernel as K
-from wsp_env.config import (
+from wsp_env.core import kernel as K
+from wsp_env.core.config import (
     ConfigError,
     RailConfig,
     VehicleConfig,
@@ -98,9 +33,12 @@ from wsp_env.config import (
     load_rails,
     load_vehicle,
 )
-from wsp_env.metrics import run_metrics
-from wsp_env.physics.layout import CMD_HOLD, EP_P_MAX
-from wsp_env.simulator import RunSetup, TrainSim, draw_run_setup
+from wsp_env.core.kernel import Params, State
+from wsp_env.core.metrics import run_metrics
+from wsp_env.core.records import RunRecord
+from wsp_env.core.simulator import RunSetup, TrainSim, draw_run_setup
+from wsp_env.physics import layout as L
+from wsp_env.physics.layout import CMD_HOLD
 
 PARALLEL_MIN_ENVS = 64
 
@@ -177,8 +115,9 @@ def _config(cls: type, value: Any, name: str) -> Any:
     return from_dict(cls, value, name)
 
 
-class _BrakingCore:
-    """State and stepping shared by the single and the vector environment."""
+class BrakingCore:
+    """``n_envs`` stops stepped together (module docstring); the arguments are
+    ``WSPBrakingEnv``'s (``wsp_env.envs``)."""
 
     def __init__(
         self,
@@ -275,6 +214,17 @@ class _BrakingCore:
             self._base_stale = True
             self._base_pending: list[int] = list(range(n_envs))
 
+        sim = self.sim
+        self.params = Params(
+            valve_of_axle=self.valve_of_axle, env_par=sim.env_par, axle_par=sim.axle_par,
+            sections=sim.sections, obs_par=self.obs_par, reward_par=self.reward_par,
+        )  # fmt: skip
+        self.state = State(
+            cmd=sim.cmd, env_state=sim.env_state, axle_state=sim.axle_state, field=sim.field,
+            env_acc=sim.env_acc, axle_acc=sim.axle_acc, wsp=self.wsp, prev_wheel=self.prev_wheel,
+            prev_action=self.prev_action, obs=self._kobs, terms=self.terms, flags=self.flags,
+        )  # fmt: skip
+
     # ---- observation ------------------------------------------------------------------------
 
     @property
@@ -358,7 +308,13 @@ class _BrakingCore:
         fixed["rail_name"] = rail_name
         return draw_run_setup(rail, rng, speed, **fixed)
 
-    def reset_env(self, e: int, options: dict[str, Any] | None) -> dict[str, Any]:
+    def reset_env(
+        self, e: int, options: dict[str, Any] | None = None, seed: int | None = None
+    ) -> dict[str, Any]:
+        """Start a new stop in env ``e``: draw its scenario (``options`` fix any drawn
+        parameter; ``seed``, if given, first reseeds env ``e``'s generator)."""
+        if seed is not None:
+            self.rngs[e] = seeding.np_random(seed)[0]
         setup = self.draw_setup(self.rngs[e], options)
         sim = self.sim
         sim.configure(e, setup)
@@ -369,10 +325,7 @@ class _BrakingCore:
         bias = self.accelerometer_bias_mps2
         drawn = self.rngs[e].uniform(-bias, bias) if self.accelerometer else 0.0
         self.wsp[e, K.W_ACC_BIAS] = drawn
-        K.reset_obs(
-            e, sim.env_par, sim.axle_par, sim.env_state, sim.axle_state, self.wsp,
-            self.prev_wheel, self.prev_action, self.obs_par, sim.control_period_s, self._kobs,
-        )  # fmt: skip
+        K.reset_observation(e, self.params, self.state, sim.control_period_s)
         if self.base is not None:
             self._base_pending.append(e)
             self._base_stale = True
@@ -442,17 +395,71 @@ class _BrakingCore:
         return np.where(a == 0.0, 0.0, np.where(a == 1.0, CMD_HOLD, 1.0))
 
     def step(self, actions: np.ndarray) -> None:
+        """One control period of every environment (checked ``actions``, ``check_actions``)."""
         sim = self.sim
         actions, clipped = self.compose(actions)
-        self._step_fn(
-            self.mode, actions, self.valve_of_axle, sim.n_sub, sim.dt_s, sim.control_period_s,
-            sim.cmd, sim.env_par, sim.axle_par, sim.sections, sim.env_state, sim.axle_state,
-            sim.field, sim.env_acc, sim.axle_acc, self.wsp, self.prev_wheel, self.prev_action,
-            self.obs_par, self.reward_par, self._kobs, self.terms, self.flags,
+        K.env_step(
+            self._step_fn, self.mode, actions, sim.n_sub, sim.dt_s, sim.control_period_s,
+            self.params, self.state,
         )  # fmt: skip
         if clipped is not None:  # residual mode
             self.flags[:, K.F_CLIPPED] = clipped
             self._base_stale = True
+
+    def ended(self) -> np.ndarray:
+        """``(n_envs,)`` bool: the stops that ended in the last step (standstill or time)."""
+        return (self.flags[:, K.F_TERMINATED] | self.flags[:, K.F_TRUNCATED]).astype(bool)
+
+    def freeze(self, e: int) -> None:
+        """Hold env ``e`` where it ended: later steps of the batch leave it unchanged (a
+        truncated run is otherwise still moving)."""
+        self.sim.env_state[e, L.ES_STOPPED] = 1.0
+
+    @property
+    def reference_speed_mps(self) -> np.ndarray:
+        """``(n_envs,)`` the environment's WSP reference-speed estimate (a view)."""
+        return self.wsp[:, K.W_VREF]
+
+    # ---- a vehicle outside the kernel (hardware in the loop: the roller rig) ----------------
+
+    def observe_external(
+        self,
+        e: int,
+        wheel_speed_mps: np.ndarray,
+        pressure_bar: np.ndarray,
+        decel_mps2: float | None,
+    ) -> None:
+        """Write env ``e``'s observation from sensors outside the kernel: the wheel speeds and
+        cylinder pressures a rig measures, and the vehicle deceleration over the last period
+        (``None`` on the first period: the reference speed is not advanced). The reference
+        speed is updated as the kernel updates it; the previous period's wheel speeds give the
+        observed decelerations."""
+        sim = self.sim
+        if decel_mps2 is not None:
+            K.update_reference(
+                e, self.wsp, float(np.max(wheel_speed_mps)), decel_mps2, sim.env_par,
+                self.obs_par, sim.control_period_s,
+            )  # fmt: skip
+        state = sim.axle_state.copy()
+        state[e, :, L.AS_OMEGA] = wheel_speed_mps / sim.axle_par[e, :, L.AP_RADIUS]
+        state[e, :, L.AS_P] = pressure_bar
+        K.write_observation(
+            e, self.params, self.state._replace(axle_state=state), sim.control_period_s
+        )
+        self.prev_wheel[e] = wheel_speed_mps
+        if self.base is not None:
+            self._base_stale = True
+
+    def act_external(self, e: int, actions: np.ndarray) -> np.ndarray:
+        """Env ``e``'s per-axle valve commands from checked ``actions`` for a vehicle outside the
+        kernel (a fraction of the demand, or ``CMD_HOLD``); the previous action is kept for the
+        observation as the kernel keeps it."""
+        cmd = self.valve_commands(actions)[e]
+        if self.mode == K.MODE_CONTINUOUS:
+            self.prev_action[e] = np.clip(self.compose(actions)[0][e], -1.0, 1.0)
+        else:
+            self.prev_action[e] = np.asarray(actions, dtype=float)[e] - 1.0
+        return cmd
 
     # ---- state (checkpoints: a resumed training run continues bit for bit) -----------------
 
@@ -508,144 +515,45 @@ class _BrakingCore:
         )
         return metrics
 
-    def render(self, e: int = 0) -> np.ndarray:
-        from wsp_env.plotting import render_state
 
-        sim = self.sim
-        return render_state(
-            wheel_kmh=3.6 * sim.wheel_speed_mps[e],
-            train_kmh=3.6 * sim.speed_mps[e],
-            ref_kmh=3.6 * self.wsp[e, K.W_VREF],
-            pressure_bar=sim.pressure_bar[e],
-            demand_bar=float(sim.demand_bar()[e]),
-            p_max_bar=float(sim.env_par[e, EP_P_MAX]),
-            time_s=float(sim.time_s[e]),
-            distance_m=float(sim.position_m[e]),
-            v_max_kmh=self.vehicle.max_speed_kmh,
+class Recorder:
+    """A run's rows at every control period, for chosen environments of a core (what
+    ``evaluate --report``, ``simulate --trace`` and the calibration's synthetic traces record):
+    time, train speed, demand, the WSP reference speed, the train's deceleration, the wheel
+    speeds, cylinder pressures and adhesion forces. Call :meth:`snapshot` after ``reset_env``
+    and after every ``step``; an environment's rows stop once it is marked done."""
+
+    def __init__(self, core: BrakingCore, env_ids: list[int]) -> None:
+        self.core = core
+        self.env_ids = list(env_ids)
+        self.rows: dict[int, list[np.ndarray]] = {e: [] for e in self.env_ids}
+
+    def snapshot(self, done: np.ndarray) -> None:
+        """Append a row for every recorded environment not ``done``."""
+        sim = self.core.sim
+        demand = sim.demand_bar()
+        for e in self.env_ids:
+            if not done[e]:
+                head = [sim.time_s[e], sim.speed_mps[e], demand[e], self.core.wsp[e, K.W_VREF]]
+                head.append(sim.env_state[e, L.ES_DECEL])
+                wheels = [sim.wheel_speed_mps[e], sim.pressure_bar[e], sim.axle_state[e, :, L.AS_F]]
+                self.rows[e].append(np.concatenate([head, *wheels]))
+
+    def record(self, e: int) -> RunRecord:
+        """Env ``e``'s rows as a :class:`RunRecord` (a repeated time stamp kept once)."""
+        n = self.core.n_axles
+        a = np.asarray(self.rows[e])
+        keep = np.concatenate([[True], np.diff(a[:, 0]) > 1e-9])
+        a = a[keep]
+        p = a[:, 5 + n : 5 + 2 * n]
+        return RunRecord(
+            time_s=a[:, 0],
+            v_train_kmh=3.6 * a[:, 1],
+            v_axle_kmh=3.6 * a[:, 5 : 5 + n],
+            p_cyl_bar=p,
+            p_demand_bar=a[:, 2],
+            a_train_mps2=a[:, 4],
+            v_ref_kmh=3.6 * a[:, 3],
+            wsp_active=p < a[:, 2:3] - 0.05,
+            f_adhesion_N=a[:, 5 + 2 * n : 5 + 3 * n],
         )
-
-
-class WSPBrakingEnv(gym.Env):
-    __doc__ = __doc__
-    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 50}
-
-    def __init__(self, render_mode: str | None = None, **kwargs: Any) -> None:
-        if render_mode not in (None, "rgb_array"):
-            raise ValueError(f"render_mode: {render_mode!r} (supported: rgb_array)")
-        self.render_mode = render_mode
-        self.core = _BrakingCore(1, **kwargs)
-        self.action_space = self.core.action_space()
-        self.observation_space = self.core.observation_space()
-        self._reward_terms = np.zeros(K.N_TERMS)
-
-    def reset(
-        self, *, seed: int | None = None, options: dict[str, Any] | None = None
-    ) -> tuple[np.ndarray, dict[str, Any]]:
-        super().reset(seed=seed)
-        self.core.rngs[0] = self.np_random
-        info = self.core.reset_env(0, options)
-        return self.core.obs[0].copy(), info
-
-    def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
-        core = self.core
-        a = core.check_actions(np.reshape(action, (1, -1)) if np.ndim(action) == 1 else action)
-        core.step(a)
-        terms = core.terms[0]
-        reward = float(terms.sum())
-        core.episode_return[0] += reward
-        core.episode_terms[0] += terms
-        terminated = bool(core.flags[0, K.F_TERMINATED])
-        truncated = bool(core.flags[0, K.F_TRUNCATED])
-        info: dict[str, Any] = {
-            "reward_terms": dict(zip(TERM_NAMES, terms.tolist(), strict=True)),
-            "action_clipped": int(core.flags[0, K.F_CLIPPED]),
-        }
-        if terminated or truncated:
-            info["metrics"] = core.episode_info(0)
-        return core.obs[0].copy(), reward, terminated, truncated, info
-
-    def render(self) -> np.ndarray | None:
-        if self.render_mode != "rgb_array":
-            return None
-        return self.core.render(0)
-
-
-class WSPBrakingVectorEnv(VectorEnv):
-    """``num_envs`` environments stepped by one compiled call; same-step autoreset."""
-
-    metadata: ClassVar[dict[str, Any]] = {
-        "render_modes": ["rgb_array"],
-        "render_fps": 50,
-        "autoreset_mode": AutoresetMode.SAME_STEP,
-    }
-
-    def __init__(
-        self,
-        num_envs: int = 1,
-        max_episode_steps: int | None = None,
-        render_mode: str | None = None,
-        **kwargs: Any,
-    ) -> None:
-        if max_episode_steps is not None:  # gymnasium passes the spec's value; ours is time-based
-            kwargs.setdefault(
-                "max_time_s", max_episode_steps * kwargs.get("control_period_s", 0.02)
-            )
-        self.core = _BrakingCore(num_envs, **kwargs)
-        self.num_envs = num_envs
-        self.render_mode = render_mode
-        self.single_action_space = self.core.action_space()
-        self.single_observation_space = self.core.observation_space()
-        self.action_space = batch_space(self.single_action_space, num_envs)
-        self.observation_space = batch_space(self.single_observation_space, num_envs)
-        self._ended = np.zeros(num_envs, dtype=bool)
-
-    def reset(
-        self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
-    ) -> tuple[np.ndarray, dict[str, Any]]:
-        if isinstance(seed, int):
-            seeds: list[int | None] = [seed + i for i in range(self.num_envs)]
-        elif seed is None:
-            seeds = [None] * self.num_envs
-        else:
-            if len(seed) != self.num_envs:
-                raise ValueError(f"seed: {len(seed)} seeds for {self.num_envs} environments")
-            seeds = list(seed)
-        for i, s in enumerate(seeds):
-            self.core.rngs[i] = seeding.np_random(s)[0]
-        scenarios = [self.core.reset_env(i, options)["scenario"] for i in range(self.num_envs)]
-        return self.core.obs.copy(), {"scenario": np.array(scenarios, dtype=object)}
-
-    def step(
-        self, actions: Any
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
-        core = self.core
-        a = core.check_actions(actions)
-        core.step(a)
-        rewards = core.terms.sum(axis=1)
-        core.episode_return += rewards
-        core.episode_terms += core.terms
-        terminated = core.flags[:, K.F_TERMINATED].astype(bool)
-        truncated = core.flags[:, K.F_TRUNCATED].astype(bool)
-        info: dict[str, Any] = {
-            "reward_terms": {n: core.terms[:, i].copy() for i, n in enumerate(TERM_NAMES)},
-            "action_clipped": core.flags[:, K.F_CLIPPED].copy(),
-        }
-        ended = np.flatnonzero(terminated | truncated)
-        if ended.size:
-            final_obs = np.zeros((self.num_envs, core.obs_dim), dtype=np.float32)
-            final_info = np.full(self.num_envs, None, dtype=object)
-            mask = np.zeros(self.num_envs, dtype=bool)
-            mask[ended] = True
-            for e in ended:  # only the environments that just ended
-                final_obs[e] = core.final_obs(int(e))
-                final_info[e] = {"metrics": core.episode_info(e), "scenario": core.describe(e)}
-                core.reset_env(int(e), None)
-            info.update(
-                final_obs=final_obs, _final_obs=mask, final_info=final_info, _final_info=mask.copy()
-            )
-        return core.obs.copy(), rewards, terminated, truncated, info
-
-    def render(self) -> tuple[np.ndarray, ...] | None:
-        if self.render_mode != "rgb_array":
-            return None
-        return tuple(self.core.render(e) for e in range(self.num_envs))

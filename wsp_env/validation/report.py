@@ -9,8 +9,8 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from wsp_env.plotting import plot_run
-from wsp_env.trace_io import replace_dir_atomically
+from wsp_env.evaluation.plotting import plot_run
+from wsp_env.files import replace_dir_atomically
 
 
 def write_validation_report(directory: str | Path, result: dict[str, Any]) -> Path:
@@ -91,7 +91,7 @@ def _build(out: Path, result: dict[str, Any]) -> None:
         "| axle | mean sliding [km/h] | Table 6 (B1 / B2) | std [km/h] |",
         "|---|---|---|---|",
     ]
-    from wsp_env.validate import TABLE6
+    from wsp_env.validation.targets import TABLE6
 
     for i, (m, sd) in enumerate(zip(s2["mean_sliding_kmh"], s2["std_sliding_kmh"], strict=True)):
         lines.append(f"| {i + 1} | {m:.2f} | {TABLE6[0, i]:.2f} / {TABLE6[1, i]:.2f} | {sd:.2f} |")
@@ -162,7 +162,7 @@ def _build(out: Path, result: dict[str, Any]) -> None:
             f"{rig['e_C_rms_Nm'][i]:.0f} / {rig['e_C_max_Nm'][i]:.0f} | "
             f"{rig['mean_sliding_kmh'][i]:.2f} / {rig['track_mean_sliding_kmh'][i]:.2f} |"
         )
-    from wsp_env.rig import plot_rig
+    from wsp_env.rig.roller_rig import plot_rig
 
     plot_rig(rig["_result"], str(plots / "rig.png"))
     lines += ["", "![rig](plots/rig.png)", ""]
@@ -179,7 +179,8 @@ def _build(out: Path, result: dict[str, Any]) -> None:
         "| axle | mean sliding [km/h] | Table 9 T1 / T2 | envelope (+-0.5) | std [km/h] |",
         "|---|---|---|---|---|",
     ]
-    from wsp_env.traction import TABLE9_KMH, plot_traction
+    from wsp_env.rig.traction import plot_traction
+    from wsp_env.validation.targets import TABLE9_KMH
 
     lo, hi = tr["table9_envelope_kmh"]
     for i, m in enumerate(tr["mean_sliding_kmh"]):
@@ -187,7 +188,7 @@ def _build(out: Path, result: dict[str, Any]) -> None:
             f"| {i + 1} | {m:.2f} | {TABLE9_KMH[0, i]:.2f} / {TABLE9_KMH[1, i]:.2f} | "
             f"{lo[i]:.2f} to {hi[i]:.2f} | {tr['std_sliding_kmh'][i]:.2f} |"
         )
-    from wsp_env.traction import TractionRun
+    from wsp_env.rig.traction import TractionRun
 
     plot_traction(TractionRun(summary={}, record=tr["_record"]), str(plots / "traction.png"))
     lines += ["", "![traction](plots/traction.png)", ""]

@@ -2,172 +2,35 @@
 
 Every run of a suite (case x speed x seed) is one environment of a single batched core: all
 runs advance together, each policy sees exactly the same scenarios and seeds, and a run's
-metrics are taken the moment it stops (or hits the time limit).
+metrics are taken the moment it stops (or hits the time limit). ``run_one`` is a one-run suite
+on the same path (``wsp-env simulate``, the calibration's synthetic traces, the rig's track
+comparison), and ``trace_metadata`` describes such a run as a ``wsp-trace/1`` trace.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import statistics
-from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
-from gymnasium.utils import seeding
 
-from wsp_env import env_kernel as K
-from wsp_env.config import (
-    ConfigError,
-    VehicleConfig,
-    _configs_root,
-    from_dict,
-    load_rails,
-    load_vehicle,
-    read_yaml,
-)
-from wsp_env.env import OPTION_KEYS, _BrakingCore
-from wsp_env.metrics import run_metrics
-from wsp_env.physics import layout as L
-from wsp_env.reference import (
+from wsp_env.core.braking import BrakingCore, Recorder
+from wsp_env.core.config import VehicleConfig, load_rails, load_vehicle
+from wsp_env.core.metrics import run_metrics
+from wsp_env.core.records import CONTAMINANTS, RunRecord
+from wsp_env.core.simulator import VehicleArrays
+from wsp_env.evaluation.reference import (
     deceleration_distance,
     dry_reference_distances,
     equivalent_build_up_time_s,
     reference_distance,
 )
-from wsp_env.trace_io import RunRecord
+from wsp_env.evaluation.suites import CaseConfig, Run, SuiteConfig, expand
 
-# Pass/fail criteria (configurable per suite and case; EN 15595-style defaults, not normative):
-# distance against the reference for the adhesion present and against dry rail, and wheel damage
-# (lock found by wheel-rotation monitoring, sliding energy per axle, the longest slide) and air.
-CRITERIA_KEYS = (
-    "max_extension_pct",
-    "max_deceleration_distance_increase_pct",
-    "min_adhesion_utilisation",
-    "max_lock_s",
-    "max_axle_sliding_energy_kJ",
-    "max_axle_sliding_energy_pct",
-    "max_slide_s",
-    "max_air_litres",
-)
-# load cases (body masses x): tare and laden at the ends of the scenario distribution (+-15 %)
-LOAD_FACTORS = {"tare": 0.85, "nominal": 1.0, "laden": 1.15}
-
-
-@dataclass(frozen=True)
-class CaseConfig:
-    name: str
-    rail: str
-    speeds_kmh: tuple[str, ...] = field(metadata={"nonempty": True})
-    vehicle: str | None = None  # a vehicle id or file; None: the suite run's vehicle
-    mu_contaminated: float | None = field(default=None, metadata={"gt": 0.0})
-    pattern: str | None = field(
-        default=None, metadata={"choices": ("uniform", "step_up", "step_down", "patches")}
-    )
-    demand: str = field(default="emergency", metadata={"choices": ("emergency", "service")})
-    load: str | None = field(default=None, metadata={"choices": tuple(LOAD_FACTORS)})
-    load_factor: float | None = field(default=None, metadata={"gt": 0.0})
-    gradient_permille: float | None = None
-    recovery_basis: str | None = field(
-        default=None, metadata={"choices": ("rail_metre", "wheel_metre", "sliding_power")}
-    )
-    axle_mu_factor: tuple[float, ...] | None = field(default=None, metadata={"gt": 0.0})
-    extra_brake_force_N: float | None = field(default=None, metadata={"ge": 0.0})
-    sections: tuple[tuple[float, ...], ...] | None = None
-    criteria: dict[str, float] = field(default_factory=dict)
-
-    def validate(self, where: str) -> None:
-        if self.load is not None and self.load_factor is not None:
-            raise ConfigError(f"{where}.load: give load or load_factor, not both")
-
-
-@dataclass(frozen=True)
-class SuiteConfig:
-    name: str
-    description: str
-    seeds: tuple[int, ...] = field(metadata={"nonempty": True})
-    cases: tuple[CaseConfig, ...] = field(metadata={"nonempty": True})
-    criteria: dict[str, float] = field(default_factory=dict)
-
-    def validate(self, where: str) -> None:
-        prefix = f"{where}." if where else ""
-        for key in self.criteria:
-            if key not in CRITERIA_KEYS:
-                raise ConfigError(
-                    f"{prefix}criteria.{key}: unknown (one of {', '.join(CRITERIA_KEYS)})"
-                )
-        for i, case in enumerate(self.cases):
-            for key in case.criteria:
-                if key not in CRITERIA_KEYS:
-                    raise ConfigError(f"{prefix}cases[{i}].criteria.{key}: unknown criterion")
-            for s in case.speeds_kmh:
-                if s != "max":
-                    try:
-                        ok = float(s) > 0
-                    except ValueError:
-                        ok = False
-                    if not ok:
-                        raise ConfigError(
-                            f"{prefix}cases[{i}].speeds_kmh: {s!r} is not a speed or 'max'"
-                        )
-
-
-def load_suite(name_or_path: str) -> SuiteConfig:
-    """A suite by name (``quick``, ``en15595``, ``heldout``) or YAML path."""
-    p = Path(name_or_path)
-    if p.suffix not in (".yaml", ".yml"):
-        p = _configs_root() / "scenarios" / f"{name_or_path}.yaml"
-        if not p.exists():
-            known = sorted(q.stem for q in (_configs_root() / "scenarios").glob("*.yaml"))
-            raise ConfigError(f"suite: unknown suite {name_or_path!r} (known: {', '.join(known)})")
-    elif not p.exists():
-        raise ConfigError(f"{p}: no such file")
-    data = read_yaml(p)
-    if isinstance(data, dict):  # YAML reads bare numbers in speeds_kmh as numbers
-        for case in data.get("cases", []) or []:
-            if isinstance(case, dict) and isinstance(case.get("speeds_kmh"), list):
-                case["speeds_kmh"] = [str(s) for s in case["speeds_kmh"]]
-    try:
-        return from_dict(SuiteConfig, data)
-    except ConfigError as err:
-        raise ConfigError(f"{p}: {err}") from None
-
-
-@dataclass(frozen=True)
-class Run:
-    scenario: str
-    seed: int
-    options: dict[str, Any]
-    criteria: dict[str, float]
-    vehicle: VehicleConfig
-
-
-def expand(suite: SuiteConfig, vehicle: VehicleConfig) -> list[Run]:
-    """Cases x speeds x seeds, in a fixed order (a case may name its own vehicle)."""
-    runs = []
-    vehicles: dict[str, VehicleConfig] = {}
-    for case in suite.cases:
-        veh = vehicle
-        if case.vehicle is not None:
-            veh = vehicles.setdefault(case.vehicle, load_vehicle(case.vehicle))
-        for s in case.speeds_kmh:
-            speed = veh.max_speed_kmh if s == "max" else float(s)
-            name = f"{case.name}_{round(speed)}"
-            options: dict[str, Any] = {"rail": case.rail, "speed_kmh": speed, "demand": case.demand}
-            if case.load is not None:
-                options["load_factor"] = LOAD_FACTORS[case.load]
-            for key in (
-                "mu_contaminated", "pattern", "load_factor", "gradient_permille",
-                "recovery_basis", "axle_mu_factor", "extra_brake_force_N", "sections",
-            ):  # fmt: skip
-                value = getattr(case, key)
-                if value is not None:
-                    options[key] = value
-            assert set(options) <= set(OPTION_KEYS)
-            criteria = {**suite.criteria, **case.criteria}
-            runs.extend(Run(name, seed, options, criteria, veh) for seed in suite.seeds)
-    return runs
+# nothing drawn but the rail's adhesion level and pattern: nominal load, pads and level track
+NOMINAL_SCENARIO = {"load_factor": [1.0, 1.0], "pad_factor": [1.0, 1.0],
+                    "gradient_permille": [0.0, 0.0]}  # fmt: skip
 
 
 def _judge(metrics: dict[str, Any], criteria: dict[str, float]) -> dict[str, bool]:
@@ -259,27 +122,16 @@ def _run_group(
     """The runs of one vehicle, all environments of one batched core, stepped together."""
     # a trained policy brings the settings its spaces need (action mode, valve grouping, ...)
     kwargs = {**(env_kwargs or {}), **getattr(policy, "env_kwargs", {})}
-    core = _BrakingCore(len(runs), vehicle=vehicle, max_time_s=max_time_s, **kwargs)
-    sim = core.sim
-    available = np.zeros(len(runs))
+    core = BrakingCore(len(runs), vehicle=vehicle, max_time_s=max_time_s, **kwargs)
     for e, run in enumerate(runs):
-        core.rngs[e] = seeding.np_random(run.seed)[0]
-        core.reset_env(e, run.options)
-        available[e] = reference_distance(
-            sim.env_par, sim.axle_par, sim.sections, e, sim.speed_mps[e]
-        )
-    dry_rail = core.rails.get("dry") or load_rails()["dry"]
-    dry = dry_reference_distances(
-        core.vehicle, list(sim.setups), dry_rail, sim.dt_s, sim.control_period_s, max_time_s
-    )
-    t_e = equivalent_build_up_time_s(sim.env_par)
-    v0 = sim.speed_mps.copy()
+        core.reset_env(e, run.options, seed=run.seed)
+    refs = _references(core, max_time_s)
     policy.bind(core)
     policy.reset(np.arange(len(runs)))
     estimates = getattr(policy, "reference_speed", None)
     ref_sq = np.zeros(len(runs))  # integral of (v_ref - V)^2 dt, for policies that estimate one
     ref_max = np.zeros(len(runs))
-    first = {}
+    first: dict[str, int] = {}
     for e, run in enumerate(runs):
         first.setdefault(run.scenario, e)
     rec_ids = {
@@ -287,29 +139,20 @@ def _run_group(
         "all": list(range(len(runs))),
         "first_seed": sorted(first.values()),
     }[record]
-    rows: dict[int, list[np.ndarray]] = {e: [] for e in rec_ids}
-
-    def snapshot() -> None:
-        demand = sim.demand_bar()
-        for e in rec_ids:
-            if not done[e]:
-                head = [sim.time_s[e], sim.speed_mps[e], demand[e], core.wsp[e, K.W_VREF]]
-                head.append(sim.env_state[e, L.ES_DECEL])
-                rows[e].append(np.concatenate([head, sim.wheel_speed_mps[e], sim.pressure_bar[e]]))
-
+    recorder = Recorder(core, rec_ids)
     done = np.zeros(len(runs), dtype=bool)
     results: list[dict[str, Any] | None] = [None] * len(runs)
+    sim = core.sim
 
     def finish(e: int) -> dict[str, Any]:
         ref_error = None
         if estimates is not None:
             duration = max(float(sim.time_s[e]), 1e-9)
             ref_error = (3.6 * math.sqrt(ref_sq[e] / duration), 3.6 * ref_max[e])
-        refs = (available[e], dry[e], t_e[e], v0[e], ref_error)
-        return _run_result(core, e, runs[e], refs, policy.name)
+        return _run_result(core, e, runs[e], (*refs[e], ref_error), policy.name)
 
     n_steps = math.ceil(max_time_s / sim.control_period_s) + 1
-    snapshot()
+    recorder.snapshot(done)
     for _ in range(n_steps):
         actions = policy.act(core.obs)
         if estimates is not None:
@@ -317,38 +160,38 @@ def _run_group(
             ref_sq += err * err * sim.control_period_s
             ref_max = np.maximum(ref_max, np.abs(err))
         core.step(core.check_actions(actions))
-        snapshot()
-        ended = np.flatnonzero(
-            ~done & (core.flags[:, K.F_TERMINATED] | core.flags[:, K.F_TRUNCATED]).astype(bool)
-        )
+        recorder.snapshot(done)
+        ended = np.flatnonzero(~done & core.ended())
         for e in ended:
             results[e] = finish(e)
             done[e] = True
-            sim.env_state[e, L.ES_STOPPED] = 1.0  # freeze a truncated run
+            core.freeze(e)  # a truncated run stays where it ended
         if bar is not None and ended.size:
             bar.update(ended.size)
         if done.all():
             break
     for e in np.flatnonzero(~done):
         results[e] = finish(e)
-    n = core.n_axles
-    records = {}
-    for e in rec_ids:
-        a = np.asarray(rows[e])
-        keep = np.concatenate([[True], np.diff(a[:, 0]) > 1e-9])
-        a = a[keep]
-        p = a[:, 5 + n : 5 + 2 * n]
-        records[(runs[e].scenario, runs[e].seed)] = RunRecord(
-            time_s=a[:, 0],
-            v_train_kmh=3.6 * a[:, 1],
-            v_axle_kmh=3.6 * a[:, 5 : 5 + n],
-            p_cyl_bar=p,
-            p_demand_bar=a[:, 2],
-            a_train_mps2=a[:, 4],
-            v_ref_kmh=3.6 * a[:, 3],
-            wsp_active=p < a[:, 2:3] - 0.05,
-        )
+    records = {(runs[e].scenario, runs[e].seed): recorder.record(e) for e in rec_ids}
     return [r for r in results if r is not None], records
+
+
+def _references(core: BrakingCore, max_time_s: float) -> list[tuple[float, float, float, float]]:
+    """Per env, what its stop is judged against: the distance the adhesion present allows,
+    the same stop on dry rail, the equivalent build-up time and the initial speed."""
+    sim = core.sim
+    p = core.params
+    available = [
+        reference_distance(p.env_par, p.axle_par, p.sections, e, sim.speed_mps[e])
+        for e in range(core.n_envs)
+    ]
+    dry_rail = core.rails.get("dry") or load_rails()["dry"]
+    dry = dry_reference_distances(
+        core.vehicle, list(sim.setups), dry_rail, sim.dt_s, sim.control_period_s, max_time_s
+    )
+    t_e = equivalent_build_up_time_s(p.env_par)
+    v0 = sim.speed_mps.copy()
+    return [(available[e], dry[e], t_e[e], v0[e]) for e in range(core.n_envs)]
 
 
 def _run_result(
@@ -429,7 +272,112 @@ def summarise(results: list[dict[str, Any]]) -> dict[str, Any]:
     return out
 
 
-def with_option(suite: SuiteConfig, **changes: Any) -> SuiteConfig:
-    """A copy of ``suite`` with every case changed (e.g. ``mu_contaminated``)."""
-    cases = tuple(dataclasses.replace(c, **changes) for c in suite.cases)
-    return dataclasses.replace(suite, cases=cases)
+def one_run(
+    rail_name: str,
+    speed_kmh: float,
+    seed: int,
+    case: dict[str, Any] | None = None,
+    env_kwargs: dict[str, Any] | None = None,
+    name: str = "one",
+) -> tuple[SuiteConfig, dict[str, Any]]:
+    """The one-run suite of a stop from ``speed_kmh`` on rail ``rail_name`` and the environment
+    arguments it runs with (``run_one``; the roller rig draws its stop the same way): ``seed``
+    draws what ``case`` leaves open, the scenario is nominal (``NOMINAL_SCENARIO``) unless
+    ``env_kwargs["scenario"]`` says otherwise."""
+    suite = SuiteConfig(
+        name=name,
+        description="",
+        seeds=(seed,),
+        cases=(
+            CaseConfig(name="run", rail=rail_name, speeds_kmh=(str(speed_kmh),), **(case or {})),
+        ),
+    )
+    kwargs = dict(env_kwargs or {})
+    kwargs["scenario"] = {
+        "rails": {rail_name: 1.0},
+        **NOMINAL_SCENARIO,
+        **kwargs.get("scenario", {}),
+    }
+    return suite, kwargs
+
+
+def run_one(
+    vehicle: str | VehicleConfig,
+    rail_name: str,
+    speed_kmh: float,
+    policy: Any,
+    seed: int,
+    case: dict[str, Any] | None = None,
+    env_kwargs: dict[str, Any] | None = None,
+) -> tuple[dict[str, Any], RunRecord]:
+    """One stop from ``speed_kmh`` on rail ``rail_name`` with ``policy`` (``policy.make_policy``).
+
+    ``seed`` draws what ``case`` (``evaluation.CaseConfig`` fields: ``mu_contaminated``,
+    ``pattern``, ``demand``, ...) leaves open; load, pads and gradient are nominal unless
+    ``env_kwargs["scenario"]`` says otherwise. Returns the evaluation's run result (metrics,
+    ``conditions``) and the record at the control period.
+    """
+    suite, kwargs = one_run(rail_name, speed_kmh, seed, case, env_kwargs)
+    results, records = run_suite(vehicle, suite, policy, record="all", env_kwargs=kwargs)
+    return results[0], next(iter(records.values()))
+
+
+def trace_metadata(
+    vehicle: VehicleConfig,
+    conditions: dict[str, Any],
+    contaminant: str,
+    sample_period_s: float,
+    test_id: str,
+) -> dict[str, Any]:
+    """``*.meta.json`` of a simulated run (``conditions``: a run result's, for the initial
+    speed and the demand; ``contaminant``: the trace format's name, ``RailConfig.
+    contaminant_name``): nominal vehicle data only (docs/trace_format.md)."""
+    sim_arrays = VehicleArrays.from_config(vehicle)
+    gain, p_th = vehicle.brake.linear_torque()
+    veh: dict[str, Any] = {
+        "name": vehicle.name,
+        "mass_kg": sim_arrays.body_mass_kg + sim_arrays.rest_mass_kg,
+        "n_axles": vehicle.n_axles,
+        "wheel_radius_m": vehicle.wheel_radius_m,
+        "wheelset_inertia_kgm2": vehicle.wheelset_inertia_kgm2,
+        "axle_static_load_kN": [round(x / 1e3, 3) for x in sim_arrays.load_ref_N],
+        # optional (docs/trace_format.md): the quasi-static load transfer per axle that the
+        # vehicle's documents (its config: pivot and frame heights) give, body and bogie pitch
+        # together; calibration reads it when present
+        "axle_load_transfer_kN_per_mps2": [
+            round(x / 1e3, 4) for x in sim_arrays.transfer_body + sim_arrays.transfer_rest
+        ],
+        "brake": {
+            "p_threshold_bar": p_th,
+            "torque_gain_Nm_per_bar": gain,
+            "p_max_bar": vehicle.brake.p_max_bar,
+        },
+        # nominal running resistance (an optional field: documents give it, traces may not)
+        "resistance": {
+            "a_N": vehicle.resistance.a_N,
+            "b_N_per_mps": vehicle.resistance.b_N_per_mps,
+            "c_N_per_mps2": vehicle.resistance.c_N_per_mps2,
+        },
+    }
+    if not np.allclose(sim_arrays.brake_gain, gain):
+        # optional (docs/trace_format.md): per-axle torque gains where they differ, e.g. motor
+        # axles whose ED brake is blended with the friction brake
+        veh["brake"]["axle_torque_gain_Nm_per_bar"] = [
+            round(float(g), 3) for g in sim_arrays.brake_gain
+        ]
+    if len(vehicle.cars) == 1:
+        car, (b0, b1) = vehicle.cars[0], vehicle.bogies
+        veh["cog_height_m"] = car.cog_height_m
+        veh["bogie_centre_distance_m"] = b1.position_m - b0.position_m
+        veh["bogie_wheelbase_m"] = b0.wheelbase_m
+    if contaminant not in CONTAMINANTS:
+        raise ValueError(f"contaminant: {contaminant!r} is not one of {', '.join(CONTAMINANTS)}")
+    return {
+        "format": "wsp-trace/1",
+        "test_id": test_id,
+        "sample_period_s": sample_period_s,
+        "initial_speed_kmh": conditions["speed_kmh"],
+        "contaminant": contaminant,
+        "brake_type": "emergency" if conditions["demand_fraction"] >= 1.0 else "service",
+        "vehicle": veh,
+    }

@@ -1,17 +1,22 @@
 """The environment's compiled step: actions -> valves -> physics -> WSP reference speed ->
 observation and reward terms, for every environment in one call (no Python per env).
 
-Kept apart from ``env.py`` (the Gymnasium classes) so the hot path is one numba function.
+Kept apart from ``braking.py`` (the core's Python side) so the hot path is one numba function.
+Its arrays travel in two named bundles, in the spirit of gymnax's ``EnvParams`` / ``EnvState``:
+:class:`Params` (what a stop is; fixed from reset to the end) and :class:`State` (what evolves).
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from typing import NamedTuple
 
+import numpy as np
 from numba import njit, prange
 
 from wsp_env.physics.brake import demand_bar
-from wsp_env.physics.integrator import INLINE_FLAGS, KERNEL_FLAGS, _step_env, is_locked
+from wsp_env.physics.integrator import INLINE_FLAGS, KERNEL_FLAGS, is_locked, step_env
 from wsp_env.physics.layout import (
     AA_AIR_L,
     AA_SLIDE_E,
@@ -29,6 +34,36 @@ from wsp_env.physics.layout import (
     ES_V,
     ES_X,
 )
+
+
+class Params(NamedTuple):
+    """What each stop is, one row per environment (columns: ``physics.layout`` and the
+    ``OP_`` / ``RP_`` indices below); fixed from ``reset`` until the stop ends."""
+
+    valve_of_axle: np.ndarray  # (n_axles,) int: the valve each axle hangs on
+    env_par: np.ndarray  # (n_envs, N_EP): vehicle, brake, rail and scenario per env
+    axle_par: np.ndarray  # (n_envs, n_axles, N_AP): radius, inertia, loads, brake gains
+    sections: np.ndarray  # (n_envs, MAX_SECTIONS, 3): the rail's adhesion sections
+    obs_par: np.ndarray  # (N_OP,): observation scales and options
+    reward_par: np.ndarray  # (N_RP,): the reward's exchange rates
+
+
+class State(NamedTuple):
+    """What evolves (``physics.layout`` columns; the ``W_``, ``R_`` and ``F_`` indices below)."""
+
+    cmd: np.ndarray  # (n_envs, n_axles): valve commands, fraction of demand or CMD_HOLD
+    env_state: np.ndarray  # (n_envs, N_ES): time, position, speed, deceleration, stopped
+    axle_state: np.ndarray  # (n_envs, n_axles, N_AS): wheel speed, pressure, forces, levels
+    field: np.ndarray  # (n_envs, n_cells): the rail's contamination along the track
+    env_acc: np.ndarray  # (n_envs, N_EA): accumulated energies
+    axle_acc: np.ndarray  # (n_envs, n_axles, N_AA): sliding energy, air, slide times
+    wsp: np.ndarray  # (n_envs, N_W): reference speed, accelerometer reading and bias
+    prev_wheel: np.ndarray  # (n_envs, n_axles) m/s: wheel speeds at the last period's start
+    prev_action: np.ndarray  # (n_envs, n_valves): the last valve action, for the observation
+    obs: np.ndarray  # (n_envs, obs_size) float32: the kernel's observation
+    terms: np.ndarray  # (n_envs, N_TERMS): the last step's reward terms
+    flags: np.ndarray  # (n_envs, N_F) int: terminated, truncated, clipped, NaN actions
+
 
 # reward terms (columns of ``terms``); the reward is their sum; every term is a cost in metres
 # of stopping distance divided by the distance scale (env.RewardConfig gives the exchange rates)
@@ -251,7 +286,7 @@ def _env_step_one(
         damage0 += damage_cost(axle_acc[e, k, AA_SLIDE_E], reward_par)
         air0 += axle_acc[e, k, AA_AIR_L]
         slide0 += axle_acc[e, k, AA_SLIDE_T]
-    _step_env(
+    step_env(
         e,
         n_sub,
         dt,
@@ -330,3 +365,38 @@ def env_step_serial(*args):
 def env_step_parallel(*args):
     for e in prange(args[ARG_ENV_PAR].shape[0]):
         _env_step_one(e, *args)
+
+
+def env_step(
+    fn: Callable[..., None],
+    mode: int,
+    actions: np.ndarray,
+    n_sub: int,
+    dt_s: float,
+    control_period_s: float,
+    p: Params,
+    s: State,
+) -> None:
+    """One control period of every environment through ``fn`` (``env_step_serial`` or
+    ``env_step_parallel``): the bundles unpacked in the compiled entry points' order."""
+    fn(
+        mode, actions, p.valve_of_axle, n_sub, dt_s, control_period_s, s.cmd, p.env_par,
+        p.axle_par, p.sections, s.env_state, s.axle_state, s.field, s.env_acc, s.axle_acc, s.wsp,
+        s.prev_wheel, s.prev_action, p.obs_par, p.reward_par, s.obs, s.terms, s.flags,
+    )  # fmt: skip
+
+
+def reset_observation(e: int, p: Params, s: State, control_period_s: float) -> None:
+    """``reset_obs`` on the bundles: env ``e``'s WSP state after ``TrainSim.reset``."""
+    reset_obs(
+        e, p.env_par, p.axle_par, s.env_state, s.axle_state, s.wsp, s.prev_wheel, s.prev_action,
+        p.obs_par, control_period_s, s.obs,
+    )  # fmt: skip
+
+
+def write_observation(e: int, p: Params, s: State, control_period_s: float) -> None:
+    """``write_obs`` on the bundles: env ``e``'s observation from its state."""
+    write_obs(
+        e, p.env_par, p.axle_par, s.env_state, s.axle_state, s.wsp, s.prev_wheel, s.prev_action,
+        p.obs_par, control_period_s, s.obs,
+    )  # fmt: skip
