@@ -1,8 +1,9 @@
-"""Detection power of the calibration loop on traces it was not developed on (README
-"Calibration on independent traces").
+"""Detection power of the calibration loop on traces it was not developed on
+(docs/calibration.md, "Calibration on independent traces").
 
     .venv/bin/python scripts/calibration_power.py [--scenarios 20] [--clean 50] [--pairs 20]
         [--seed 0] [--jobs 2] [--json runs/power.json] [--categories gradient,wheel_radius]
+        [--markdown docs/results/calibration_power.md]
 
 Traces come from ``wsp_env/calibration/independent.py``, a simulator that shares no code with
 ``wsp_env/physics`` (its own vehicle model, friction law, WSP and logger quirks). For every
@@ -25,7 +26,8 @@ found. Targets (issue 11) are printed beside the measured figures. For the load 
 the friction change along the rail, what their candidates read against the truth whether added
 or not; for the friction change also what there was to see on each side of it (the generator's
 seconds past the friction curve's peak, ``independent.sliding_around``, and the loop's critical
-points at a slide).
+points at a slide). ``--markdown P`` writes the per-category table, the pairs and the whole
+printout there, with the command and the machine above.
 """
 
 from __future__ import annotations
@@ -43,6 +45,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from _results_md import fenced, tee_stdout, write_results
 
 # magnitude grid per category (natural units of independent.random_effect) and the target
 # magnitude at which >= 90 % must be detected (issue 11)
@@ -121,7 +124,7 @@ def _true_and_found(effect: Any, step: dict[str, Any], trace_meta: dict) -> tupl
     return math.nan, math.nan
 
 
-def _effect(ind: Any, category: str, magnitude: float, rng: np.random.Generator, sc: Any) -> Any:
+def scaled_effect(ind: Any, category: str, magnitude: float, rng: np.random.Generator, sc: Any) -> Any:
     """The generator's effect for a grid magnitude: pad friction and the rail's friction
     change are fractions off 1 here (weaker or stronger, rail worse or better: sign drawn),
     factors in the generator."""
@@ -140,7 +143,7 @@ def _run_one(job: dict[str, Any]) -> dict[str, Any]:
 
     rng = np.random.default_rng(job["seed"])
     scenario = ind.random_scenario(rng, **job.get("overrides", {}))
-    effects = [_effect(ind, c, m, rng, scenario) for c, m in job["effects"]]
+    effects = [scaled_effect(ind, c, m, rng, scenario) for c, m in job["effects"]]
     t0 = time.perf_counter()
     columns, meta = ind.generate(scenario, effects, seed=job["seed"])
     t_gen = time.perf_counter() - t0
@@ -457,6 +460,67 @@ def print_table(summary: dict[str, Any]) -> None:
           f"{summary['generate_s_median']:.2f} s; errors {len(summary['errors'])}")  # fmt: skip
 
 
+UNITS = {
+    "gradient": "permille",
+    "wheel_radius": "fraction, one axle",
+    "pad_friction": "fraction",
+    "unmeasured_brake_force": "N",
+    "running_resistance": "factor",
+    "pressure_lag": "s",
+    "sensor_scale": "fraction",
+    "sensor_lag": "s",
+    "load_transfer": "factor",
+    "adhesion_position": "fraction of mu",
+}
+
+
+def markdown_table(summary: dict[str, Any]) -> str:
+    """The study as Markdown: per category at its target magnitude, then pairs and clean traces."""
+    target = TARGETS["detection_min"]
+    lines = [
+        f"Per category at its target magnitude (detection target {100 * target:.0f} %); *or alt*: "
+        "chosen, or named among the chosen effect's equally good `alternatives` (never counted "
+        "as detected); *extra*: traces where another effect was added as well.",
+        "",
+        "| category | target (unit) | n | detected | or alt | smallest at >= 90 % "
+        "| parameter error | extra | met |",
+        "|---|---|---:|---:|---:|---|---:|---:|---|",
+    ]
+    for cat, info in summary["categories"].items():
+        rows = [r for r in info["rows"] if r["magnitude"] == info["target_magnitude"]]
+        if not rows:
+            continue
+        r = rows[0]
+        err = r["param_rel_error_median"]
+        err_text = "—" if err is None or not math.isfinite(err) else f"{100 * err:.0f} %"
+        smallest = info["smallest_90pct"]
+        lines.append(
+            f"| {cat} | {info['target_magnitude']:g} ({UNITS.get(cat, '')}) | {r['n']} | "
+            f"{100 * r['detection_rate']:.0f} % | {100 * r['found_or_named_rate']:.0f} % | "
+            f"{'—' if smallest is None else f'{smallest:g}'} | {err_text} | "
+            f"{100 * r['extra_effect_rate']:.0f} % | "
+            f"{'yes' if r['detection_rate'] >= target else 'no'} |"
+        )
+    if summary["pairs"]:
+        lines += ["", f"Pairs, both found (target {100 * TARGETS['pairs_min']:.0f} %):", ""]
+        lines += [
+            f"- {' + '.join(map(str, p['effects']))}: {100 * p['both_found_rate']:.0f} % "
+            f"(n {p['n']})"
+            for p in summary["pairs"]
+        ]
+    c = summary["clean"]
+    lines += [
+        "",
+        f"False positives (any effect added to a clean trace; target <= "
+        f"{100 * TARGETS['false_positive_max']:g} %): {100 * c['false_positive_rate']:.1f} % of "
+        f"{c['n']}.",
+        "",
+        f"Calibration per trace: median {summary['calibrate_s_median']:.2f} s, max "
+        f"{summary['calibrate_s_max']:.2f} s; {summary['traces']} traces.",
+    ]
+    return "\n".join(lines)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scenarios", type=int, default=20)
@@ -466,6 +530,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--categories", default="", help="comma-separated subset of the grid")
     ap.add_argument("--json", dest="json_path", default=None)
+    ap.add_argument("--markdown", default=None, help="write the tables here (.md)")
     args = ap.parse_args(argv)
     unknown = set(filter(None, args.categories.split(","))) - set(GRID)
     if unknown:
@@ -478,8 +543,14 @@ def main(argv: list[str] | None = None) -> int:
     summary = summarise(results)
     summary["wall_s"] = time.perf_counter() - t0
     summary["command"] = " ".join(["scripts/calibration_power.py", *(argv or sys.argv[1:])])
-    print_table(summary)
-    print(f"wall time {summary['wall_s']:.0f} s for {len(jobs)} traces")
+    with tee_stdout() as printed:
+        print_table(summary)
+        print(f"wall time {summary['wall_s']:.0f} s for {len(jobs)} traces")
+    if args.markdown:
+        body = f"{markdown_table(summary)}\n\nThe whole printout:\n\n{fenced(printed.getvalue())}"
+        title = "Calibration: detection power on independent traces"
+        write_results(args.markdown, title, body, summary["wall_s"])
+        print(f"wrote {args.markdown}")
     if args.json_path:
         path = Path(args.json_path)
         path.parent.mkdir(parents=True, exist_ok=True)

@@ -116,13 +116,13 @@ def test_a_simple_step_reading_finds_a_friction_change_on_a_power_study_trace():
 
     fsn = _null_script()
     seed = 101011
-    row = fsn._one({"kind": "step", "effects": [("adhesion_position", 0.3)], "seed": seed})
+    row = fsn.run_job({"kind": "step", "effects": [("adhesion_position", 0.3)], "seed": seed})
     reading = row["reading"]
     assert row["true_factor"] == 1.3 and reading is not None
     assert reading["factor"] > 1.2 and reading["z"] > 3.0
     rng = np.random.default_rng(seed)
     scenario = ind.random_scenario(rng, contaminant=row["rail"])
-    effect = fsn.cp._effect(ind, "adhesion_position", 0.3, rng, scenario)
+    effect = fsn.cp.scaled_effect(ind, "adhesion_position", 0.3, rng, scenario)
     columns, _ = ind.generate(scenario, [effect], seed=seed)
     t, v = columns["time_s"], np.nan_to_num(columns["v_train_kmh"])
     x_brake = float(np.interp(scenario.lead_in_s, t, cumulative_trapezoid(v / 3.6, t, initial=0)))

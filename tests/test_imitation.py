@@ -8,10 +8,10 @@ import json
 import numpy as np
 import pytest
 import yaml
-from test_train import _config
+from test_train import train_config
 
 from wsp_env.cli import main
-from wsp_env.core.braking import BrakingCore
+from wsp_env.envs import make_core
 from wsp_env.policy import SB3Policy
 from wsp_env.training.imitation import make_teacher
 
@@ -23,7 +23,7 @@ PRETRAIN = {
 
 def _teacher_gap(policy: SB3Policy, seed: int) -> float:
     """Mean |student - teacher| action over a soap stop the student drives (its own states)."""
-    core = BrakingCore(4, **policy.env_kwargs)
+    core = make_core(4, **policy.env_kwargs)
     for e in range(4):
         core.rngs[e] = np.random.default_rng(seed + e)
         core.reset_env(e, {"rail": "soap", "speed_kmh": 40, "mu_contaminated": 0.07})
@@ -44,7 +44,7 @@ def test_pretraining_moves_the_student_toward_the_teacher(tmp_path):
                   "scenario": {"speed_kmh": [30, 50], "rails": {"soap": 1.0}}}  # fmt: skip
     runs = {}
     for name, extra in (("plain", {}), ("bc", {"pretrain": PRETRAIN})):
-        cfg = _config(
+        cfg = train_config(
             tmp_path,
             n_timesteps=256,
             env_kwargs=env_kwargs,
@@ -84,7 +84,7 @@ def test_pretraining_moves_the_student_toward_the_teacher(tmp_path):
     ],
 )
 def test_bad_pretrain_block_is_one_line(tmp_path, capsys, changes, field):
-    cfg = yaml.safe_load(_config(tmp_path).read_text())
+    cfg = yaml.safe_load(train_config(tmp_path).read_text())
     cfg.update(changes)
     if cfg["algo"] == "sac":
         for key in ("n_steps", "n_epochs", "gae_lambda"):

@@ -33,7 +33,7 @@ def test_generator_shares_no_code_with_the_project():
                      "typing", "numpy"}, names  # fmt: skip
 
 
-def _trace(tmp_path, seed, effects=(), **overrides):
+def independent_trace(tmp_path, seed, effects=(), **overrides):
     rng = np.random.default_rng(seed)
     scenario = ind.random_scenario(rng, **overrides)
     effs = [ind.random_effect(c, m, rng, scenario) for c, m in effects]
@@ -69,7 +69,7 @@ def test_the_generators_truth_says_where_the_wheels_meet_the_adhesion_limit():
 
 
 def test_a_held_ground_speed_is_interpolated_between_updates(tmp_path):
-    trace, _, _ = _trace(tmp_path, 1, gps_rate_hz=1.0, log_period_s=0.1, log_mode="hold")
+    trace, _, _ = independent_trace(tmp_path, 1, gps_rate_hz=1.0, log_period_s=0.1, log_mode="hold")
     assert any("held between updates" in n for n in trace.notes)
     moving = trace.v_train_kmh > 5.0
     assert np.mean(np.diff(trace.v_train_kmh[moving]) == 0.0) < 0.05
@@ -86,7 +86,7 @@ def test_clean_traces_get_no_effect(tmp_path, seed):
     (``plausibility.negligible``), and its Burckhardt curve, speed fall-off and rail cleaning
     name no adhesion effect. (These seeds were looked at while the loop was developed; the
     README gives the false-positive rate on sets that were not.)"""
-    trace, _, _ = _trace(tmp_path, seed)
+    trace, _, _ = independent_trace(tmp_path, seed)
     result = discover(trace)
     assert [(s.category, s.parameters) for s in result.added] == []
 
@@ -97,7 +97,7 @@ def test_a_stop_that_never_slides_gets_no_friction_step(tmp_path, seed):
     reach the adhesion limit, so their critical points trace the brake's ramp up the creep
     curve's initial slope, which a step on the rail (with an absurd base law) once fitted. A
     friction step needs slides (``discovery.STEP_MIN_SLIDES``) and evidence on both sides."""
-    trace, _, _ = _trace(tmp_path, seed)
+    trace, _, _ = independent_trace(tmp_path, seed)
     assert "adhesion_position" not in [s.category for s in discover(trace).added]
 
 
@@ -116,7 +116,7 @@ def test_a_stop_that_never_slides_gets_no_friction_step(tmp_path, seed):
     ],
 )
 def test_an_undeclared_effect_is_found(tmp_path, seed, category, magnitude, key, rel):
-    trace, (effect,), _ = _trace(tmp_path, seed, [(category, magnitude)])
+    trace, (effect,), _ = independent_trace(tmp_path, seed, [(category, magnitude)])
     result = discover(trace)
     want = "sensor" if category.startswith("sensor") else category
     hits = [s for s in result.added if s.category == want and key in s.parameters]
@@ -134,7 +134,7 @@ def test_an_undeclared_effect_is_found(tmp_path, seed, category, magnitude, key,
 def test_a_worn_wheel_is_found_from_half_a_second_of_coasting(tmp_path):
     """0.8 % on one axle, 0.5 s lead-in: judged on the axles' differences, which the
     ground-speed sensor's noise and lag do not reach."""
-    trace, (effect,), _ = _trace(tmp_path, 21, [("wheel_radius", 0.008)], lead_in_s=0.5)
+    trace, (effect,), _ = independent_trace(tmp_path, 21, [("wheel_radius", 0.008)], lead_in_s=0.5)
     result = discover(trace)
     hits = [s for s in result.added if s.category == "wheel_radius"]
     assert hits
@@ -160,7 +160,7 @@ def test_a_worn_wheel_is_found_from_half_a_second_of_coasting(tmp_path):
 def test_a_force_effect_and_a_pressure_lag_are_found_together(tmp_path, seed, effects, want):
     """A lag looks much like a constant force during the stop: fitted on their own, a force
     effect and a lag are taken for a gradient plus the force; the joint fit finds both."""
-    trace, _, _ = _trace(tmp_path, seed, effects)
+    trace, _, _ = independent_trace(tmp_path, seed, effects)
     result = discover(trace)
     found = {s.category for s in result.added if s.channel == "train_speed_balance_kmh"}
     assert found == want, [(s.category, s.parameters) for s in result.added]
@@ -175,7 +175,7 @@ def test_a_lag_the_wheels_measured_is_tried_with_a_force_on_a_quiet_balance(tmp_
     alone made the balance worse (1.04 km/h). Under the noise gate the wheels' lag is tried with
     each force beside it, and the force must still earn its place against the lag alone."""
     effects = [("unmeasured_brake_force", 4000.0), ("pressure_lag", 0.3)]
-    result = discover(_trace(tmp_path, 502014, effects)[0])
+    result = discover(independent_trace(tmp_path, 502014, effects)[0])
     found = {s.category: s.parameters for s in result.added}
     assert set(found) == {"unmeasured_brake_force", "pressure_lag"}, found
     assert found["unmeasured_brake_force"]["force_at_full_demand_N"] == pytest.approx(4000, rel=0.2)
@@ -188,7 +188,7 @@ def test_a_force_with_the_brake_is_judged_over_the_stop_not_the_lead_in(tmp_path
     stop: from the brake application, not diluted by however long the logger coasted first."""
     from wsp_env.calibration.plausibility import negligible_force, stop_samples
 
-    trace, _, _ = _trace(tmp_path, 5, lead_in_s=9.0, n_axles=16, speed_kmh=60.0)
+    trace, _, _ = independent_trace(tmp_path, 5, lead_in_s=9.0, n_axles=16, speed_kmh=60.0)
     stop = stop_samples(trace)
     start = trace.time_s[np.argmax(stop)]
     assert 9.0 <= start <= 9.0 + 1.0  # the brake's threshold is crossed within the fill
@@ -205,13 +205,13 @@ def test_a_quiet_balance_is_tried_but_a_candidate_must_cut_a_noise_floor(tmp_pat
     leaves the balance under twice its noise floor; between 1.5 and 2 floors a candidate is
     tried and must cut a whole floor, which the lag does. Held-out clean seed 18000026 (wet, 16
     axles): a 2.3 kN brake force cut the same quiet balance by half a floor only."""
-    result = discover(_trace(tmp_path, 81017, [("sensor_lag", 0.2)])[0])
+    result = discover(independent_trace(tmp_path, 81017, [("sensor_lag", 0.2)])[0])
     lags = [s.parameters["speed_lag_s"] for s in result.added if "speed_lag_s" in s.parameters]
     assert lags == [pytest.approx(0.2, abs=0.06)], [
         (s.category, s.parameters) for s in result.added
     ]
     assert result.added[0].confidence["cut_over_noise_floor"] >= 1.0
-    clean = discover(_trace(tmp_path, 18000026)[0])
+    clean = discover(independent_trace(tmp_path, 18000026)[0])
     assert clean.added == []
     assert any("quiet" in c.get("rejected", "") for c in clean.considered)
 
@@ -220,7 +220,7 @@ def test_a_quiet_balance_is_tried_but_a_candidate_must_cut_a_noise_floor(tmp_pat
 def test_a_late_ground_speed_is_not_taken_for_a_late_brake(tmp_path, seed):
     """0.4 s of ground-speed lag: the balance alone cannot tell it from a pressure lag; the
     shifted prediction and the wheels (the ground speed reads above the rolling wheels) do."""
-    trace, _, _ = _trace(tmp_path, seed, [("sensor_lag", 0.4)])
+    trace, _, _ = independent_trace(tmp_path, seed, [("sensor_lag", 0.4)])
     result = discover(trace)
     cats = [s.category for s in result.added if s.channel == "train_speed_balance_kmh"]
     assert cats == ["sensor"], [(s.category, s.parameters) for s in result.added]
@@ -245,7 +245,7 @@ def test_a_late_ground_speed_is_not_taken_for_a_late_brake(tmp_path, seed):
 def test_the_loggers_own_timing_is_no_effect(tmp_path, seed, reason):
     """A force effect must earn its place against a sub-resolution lag fitted alongside, and a
     lag must be told from one (``discovery._timing_verdict``, ``_lag_beyond_timing``)."""
-    trace, _, _ = _trace(tmp_path, seed)
+    trace, _, _ = independent_trace(tmp_path, seed)
     result = discover(trace)
     assert [s.category for s in result.added] == []
     assert any(reason in c.get("rejected", "") for c in result.considered)
@@ -255,7 +255,7 @@ def test_adhesion_effects_need_the_wheels_at_the_limit(tmp_path):
     """Held-out clean seed 1000045 (dry rail, two cars): no wheel slid, the critical points are
     the creep curve's initial slope, whose per-axle pattern is each car's body pitch (the
     metadata's pitch acts on the rake's halves) — once reported as per-axle adhesion."""
-    trace, _, _ = _trace(tmp_path, 1000045)
+    trace, _, _ = independent_trace(tmp_path, 1000045)
     result = discover(trace)
     assert not [s for s in result.added if s.channel == "adhesion_fit_kN"]
     assert not [c for c in result.considered if c["channel"] == "adhesion_fit_kN"]
@@ -269,7 +269,7 @@ def test_two_forces_that_cancel_are_no_finding(tmp_path):
     explained the balance together (``plausibility.cancelling_forces``); judged over the stop
     (from the brake application: the gradient alone acts in the lead-in) their sum is
     negligible (``plausibility.negligible_force``)."""
-    result = discover(_trace(tmp_path, 5000011)[0])
+    result = discover(independent_trace(tmp_path, 5000011)[0])
     assert result.added == []
     pair = [c for c in result.considered if c["name"] == "gradient + unmeasured_brake_force"]
     assert pair and any(w in pair[0].get("rejected", "") for w in ("cancel", "together"))
@@ -278,7 +278,7 @@ def test_two_forces_that_cancel_are_no_finding(tmp_path):
 def test_an_adhesion_extension_needs_enough_critical_points(tmp_path):
     """Held-out clean seed 5000016 (leaves, 8 axles, 17 critical points): a load transfer and
     a friction step were fitted to them; an extension needs 5 points per parameter."""
-    result = discover(_trace(tmp_path, 5000016)[0])
+    result = discover(independent_trace(tmp_path, 5000016)[0])
     assert not [s for s in result.added if s.channel == "adhesion_fit_kN"]
     why = [c.get("rejected", "") for c in result.considered if c["channel"] == "adhesion_fit_kN"]
     assert why and all("per parameter needed" in w for w in why)
@@ -290,7 +290,7 @@ def test_a_vented_wheel_is_not_coasting(tmp_path):
     deceleration), once taken for worn leading wheels. Coasting is the train unbraked."""
     from wsp_env.calibration.residuals import coasting_creep
 
-    trace, _, _ = _trace(tmp_path, 6000007)
+    trace, _, _ = independent_trace(tmp_path, 6000007)
     mask = coasting_creep(trace).mask
     first_brake = trace.time_s[np.argmax((trace.p_cyl_bar > 0.3).any(axis=1))]
     assert mask.any() and trace.time_s[mask.any(axis=1)].max() < first_brake
@@ -306,7 +306,7 @@ def test_a_gradient_survives_a_resistance_that_only_compensated(tmp_path, seed):
     weak and the compensating effect then for good (as propelling, or as negligible once the
     scale is in). A weak effect comes back when the effect it was weak beside is dropped for
     good."""
-    trace, (grad, _), _ = _trace(tmp_path, seed, [("gradient", 6.0), ("sensor_scale", 0.02)])
+    trace, (grad, _), _ = independent_trace(tmp_path, seed, [("gradient", 6.0), ("sensor_scale", 0.02)])
     result = discover(trace)
     found = {s.category: s.parameters for s in result.added}
     assert set(found) == {"gradient", "sensor"}, found
@@ -323,7 +323,7 @@ def test_a_rail_cleaned_along_the_train_is_no_per_axle_effect(tmp_path, seed):
     (1 / 1.00 / 1.19 / 1.42); per-axle factors that a monotone rise fits as well are nominal
     (``discovery._cleaning_explains``). One axle off the others is still found
     (``test_discovery.test_undeclared_effect_is_named``)."""
-    result = discover(_trace(tmp_path, seed)[0])
+    result = discover(independent_trace(tmp_path, seed)[0])
     assert result.added == []
     assert any("rising along the train" in c.get("rejected", "") for c in result.considered)
 
@@ -333,7 +333,7 @@ def test_a_rail_cleaned_along_the_train_is_no_per_axle_effect(tmp_path, seed):
 # periods trails the pressures by half an update by itself
 @pytest.mark.parametrize("seed", [23000095, 24000010])
 def test_a_loggers_averaging_of_gps_updates_is_no_ground_speed_lag(tmp_path, seed):
-    trace, _, _ = _trace(tmp_path, seed)
+    trace, _, _ = independent_trace(tmp_path, seed)
     assert trace.v_train_update_s == pytest.approx(0.2)
     assert trace.v_train_logger_lag_s == pytest.approx(0.1)
     result = discover(trace)
@@ -344,7 +344,7 @@ def test_a_ground_speed_lag_beyond_the_loggers_averaging_is_found(tmp_path):
     """Power-study trace 81018 (5 Hz GPS averaged at 10 Hz, leaves, 4 axles) with a 0.2 s
     ground-speed lag: the column shows the lag plus the logger's 0.1 s, and the lag beyond the
     logger's part is reportable."""
-    trace, _, _ = _trace(tmp_path, 81018, [("sensor_lag", 0.2)])
+    trace, _, _ = independent_trace(tmp_path, 81018, [("sensor_lag", 0.2)])
     assert trace.v_train_logger_lag_s == pytest.approx(0.1)
     result = discover(trace)
     lags = [s.parameters["speed_lag_s"] for s in result.added if s.category == "sensor"]
@@ -356,7 +356,7 @@ def test_a_ground_speed_lag_beyond_the_loggers_averaging_is_found(tmp_path):
 # speed rests on one to four fixes
 @pytest.mark.parametrize("seed", [23000016, 23000099])
 def test_a_sparse_gps_on_a_short_lead_in_is_no_ground_speed_lag(tmp_path, seed):
-    trace, _, _ = _trace(tmp_path, seed)
+    trace, _, _ = independent_trace(tmp_path, seed)
     assert trace.v_train_update_s is not None and trace.v_train_update_s >= 0.5
     result = discover(trace)
     assert [s.category for s in result.added] == []

@@ -11,11 +11,10 @@ import zipfile
 import numpy as np
 import pytest
 import yaml
-from test_train import _config
+from test_train import train_config
 
 from wsp_env.cli import main
-from wsp_env.core.braking import BrakingCore
-from wsp_env.envs import WSPBrakingEnv, WSPBrakingVectorEnv
+from wsp_env.envs import WSPBrakingEnv, WSPBrakingVectorEnv, make_core
 from wsp_env.evaluation import load_suite, run_suite
 from wsp_env.policy import META_NAME, SB3Policy, make_policy
 
@@ -88,7 +87,7 @@ def residual_run(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("residual")
     env_kwargs = {"vehicle": "uic_z1", "action_mode": "residual", "accelerometer": True,
                   "scenario": {"speed_kmh": [30, 40]}}  # fmt: skip
-    cfg = _config(tmp, n_timesteps=256, frame_stack=2, env_kwargs=env_kwargs)
+    cfg = train_config(tmp, n_timesteps=256, frame_stack=2, env_kwargs=env_kwargs)
     out = tmp / "run"
     assert main(["train", "--config", str(cfg), "--out", str(out), "--no-progress"]) == 0
     return tmp, out
@@ -148,7 +147,7 @@ def test_onnx_export_matches_the_sb3_policy(residual_run, tmp_path):
     meta = session.get_modelmeta().custom_metadata_map
     fill = np.asarray(json.loads(meta["frame_fill"]), dtype=np.float32)
     policy = SB3Policy(out / "best_model.zip")
-    core = BrakingCore(4, **policy.env_kwargs)
+    core = make_core(4, **policy.env_kwargs)
     for e in range(4):
         core.rngs[e] = np.random.default_rng(e)
         core.reset_env(e, {"rail": "soap", "speed_kmh": 60})

@@ -18,7 +18,8 @@ from wsp_env.core.braking import BrakingCore
 from wsp_env.envs import WSPBrakingVectorEnv
 from wsp_env.evaluation import load_suite, run_suite
 from wsp_env.policy import SB3Policy, make_policy
-from wsp_env.training.train import LinearSchedule, latest_checkpoint, load_train_config
+from wsp_env.training.config import LinearSchedule, load_train_config
+from wsp_env.training.train import latest_checkpoint
 
 SUITE = {
     "name": "tiny",
@@ -32,7 +33,7 @@ SUITE = {
 }  # fmt: skip
 
 
-def _config(tmp_path, **changes):
+def train_config(tmp_path, **changes):
     suite = tmp_path / "suite.yaml"
     suite.write_text(yaml.safe_dump(SUITE))
     cfg = {
@@ -57,7 +58,7 @@ SAC = {
 
 
 def _sac(tmp_path):
-    cfg = yaml.safe_load(_config(tmp_path).read_text())
+    cfg = yaml.safe_load(train_config(tmp_path).read_text())
     for key in ("n_steps", "n_epochs"):  # PPO's
         cfg.pop(key)
     cfg.update(SAC)
@@ -87,7 +88,7 @@ def _same(a, b):
 def ppo_run(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("train")
     out = tmp / "run"
-    code = main(["train", "--config", str(_config(tmp)), "--out", str(out), "--no-progress",
+    code = main(["train", "--config", str(train_config(tmp)), "--out", str(out), "--no-progress",
                  "--json", str(tmp / "train.json")])  # fmt: skip
     return code, tmp, out
 
@@ -161,10 +162,10 @@ def test_resume_in_chunks_is_bit_for_bit(tmp_path, kind):
     environments' physics and random generators, torch's and numpy's random state (and SAC's
     replay buffer, the frame stack, the LSTM state) come back from the checkpoint."""
     cfg = {
-        "ppo": lambda: _config(tmp_path),
+        "ppo": lambda: train_config(tmp_path),
         "sac": lambda: _sac(tmp_path),
-        "frame_stack": lambda: _config(tmp_path, frame_stack=3),
-        "recurrent_ppo": lambda: _config(tmp_path, **RECURRENT),
+        "frame_stack": lambda: train_config(tmp_path, frame_stack=3),
+        "recurrent_ppo": lambda: train_config(tmp_path, **RECURRENT),
     }[kind]()
     half = "200" if kind == "sac" else "256"
     one, part, rest = tmp_path / "one", tmp_path / "part", tmp_path / "rest"
@@ -198,7 +199,7 @@ def test_discrete_models_are_evaluated_in_discrete_mode(tmp_path):
     evaluation: its outputs are never read as continuous valve commands."""
     env_kwargs = {"vehicle": "uic_z1", "action_mode": "discrete",
                   "scenario": {"speed_kmh": [30, 40]}}  # fmt: skip
-    cfg = _config(tmp_path, env_kwargs=env_kwargs, n_timesteps=256)
+    cfg = train_config(tmp_path, env_kwargs=env_kwargs, n_timesteps=256)
     out = tmp_path / "run"
     assert main(["train", "--config", str(cfg), "--out", str(out), "--no-progress"]) == 0
     policy = make_policy(str(out / "model.zip"))
@@ -237,7 +238,7 @@ def test_discrete_models_are_evaluated_in_discrete_mode(tmp_path):
     ],
 )
 def test_bad_config_is_one_line_naming_file_and_field(tmp_path, capsys, changes, field):
-    cfg = _config(tmp_path, **changes)
+    cfg = train_config(tmp_path, **changes)
     out = tmp_path / "run"
     assert main(["train", "--config", str(cfg), "--out", str(out), "--no-progress"]) == 2
     err = capsys.readouterr().err.strip()
@@ -253,7 +254,7 @@ def test_resume_without_checkpoint_and_occupied_out_are_refused(tmp_path, capsys
     busy = tmp_path / "busy"
     busy.mkdir()
     (busy / "x").write_text("keep me")
-    assert main(["train", "--config", str(_config(tmp_path)), "--out", str(busy)]) == 2
+    assert main(["train", "--config", str(train_config(tmp_path)), "--out", str(busy)]) == 2
     assert (busy / "x").read_text() == "keep me"
 
 
@@ -279,7 +280,7 @@ def test_stacked_and_recurrent_policies_evaluate_with_their_memory(tmp_path, cha
     state, reset per episode: acting twice on the same observation after a reset gives the
     same first action, and the state/stack then differs from a fresh episode's."""
     out = tmp_path / "run"
-    cfg = _config(tmp_path, n_timesteps=256, **changes)
+    cfg = train_config(tmp_path, n_timesteps=256, **changes)
     assert main(["train", "--config", str(cfg), "--out", str(out), "--no-progress"]) == 0
     policy = make_policy(str(out / "model.zip"))
     core = BrakingCore(2)
@@ -325,11 +326,11 @@ def test_a_run_failing_before_its_first_checkpoint_leaves_no_folder(tmp_path, mo
     out = tmp_path / "run"
     monkeypatch.setattr(training, "_save_checkpoint", broken)
     with pytest.raises(RuntimeError):
-        training.train(_config(tmp_path, n_timesteps=64), out, progress=False)
+        training.train(train_config(tmp_path, n_timesteps=64), out, progress=False)
     assert not out.exists()
 
 
 def test_resume_refuses_a_second_config(ppo_run, capsys):
     _, tmp, out = ppo_run
-    assert main(["train", "--resume", str(out), "--config", str(_config(tmp))]) == 2
+    assert main(["train", "--resume", str(out), "--config", str(train_config(tmp))]) == 2
     assert "--config" in capsys.readouterr().err

@@ -138,12 +138,20 @@ class SB3Policy:
         if self._episode_start is not None:
             self._episode_start[env_ids] = True
 
-    def normalise(self, obs: np.ndarray) -> np.ndarray:
+    def normalisation(self) -> tuple[np.ndarray, np.ndarray, float] | None:
+        """The observation normalisation ``clip((obs - mean) / scale, -clip, clip)`` as
+        ``(mean, scale, clip)`` for one frame, or None when observations go in unnormalised."""
         if self._obs_rms is None or not self._norm_obs:
-            return obs
+            return None
         rms = self._obs_rms
-        out = (obs - rms.mean) / np.sqrt(rms.var + self._epsilon)
-        return np.clip(out, -self._clip_obs, self._clip_obs).astype(np.float32)
+        return np.asarray(rms.mean), np.sqrt(rms.var + self._epsilon), self._clip_obs
+
+    def normalise(self, obs: np.ndarray) -> np.ndarray:
+        norm = self.normalisation()
+        if norm is None:
+            return obs
+        mean, scale, clip = norm
+        return np.clip((obs - mean) / scale, -clip, clip).astype(np.float32)
 
     def act(self, obs: np.ndarray) -> np.ndarray:
         x = self.normalise(obs)

@@ -137,6 +137,7 @@ class BrakingCore:
         control_period_s: float = 0.02,
         substep_s: float = 1e-3,
         max_time_s: float = 300.0,
+        residual_base: Any = None,
     ) -> None:
         veh = vehicle if isinstance(vehicle, VehicleConfig) else load_vehicle(vehicle)
         if valve_group is not None:
@@ -203,11 +204,16 @@ class BrakingCore:
         # residual mode: the classical WSP runs beside the kernel; its requests for the coming
         # period are computed once per period, when the observation is first read after a step
         # or a reset (``obs``), so that it advances exactly once per control period
+        # (``residual_base``: the controller the residual acts on, a policy object with
+        # ``bind`` / ``reset`` / ``act``; ``envs.make_core`` gives the frozen classical WSP)
         self.base: Any = None
         if residual:
-            from wsp_env.baselines.classical import ClassicalWSP, load_wsp_config
-
-            self.base = ClassicalWSP(load_wsp_config())
+            if residual_base is None:
+                raise ValueError(
+                    "action_mode: 'residual' needs residual_base (envs.make_core supplies the "
+                    "classical WSP)"
+                )
+            self.base = residual_base
             self.base.bind(self)
             self.base_action = np.ones((n_envs, self.n_valves), dtype=np.float32)
             self._obs_full = np.zeros((n_envs, self.obs_dim), dtype=np.float32)

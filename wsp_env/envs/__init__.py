@@ -1,6 +1,7 @@
 """The Gymnasium environments over the braking core: ``WSPBraking-v0`` single and native vector
-(``wsp_braking``), and their ``rgb_array`` frames (``rendering``)."""
+(``wsp_braking``), their ``rgb_array`` frames (``rendering``), and ``make_core``, the core as the
+environments build it (what evaluation, training and the rig build too)."""
 
-from wsp_env.envs.wsp_braking import WSPBrakingEnv, WSPBrakingVectorEnv
+from wsp_env.envs.wsp_braking import WSPBrakingEnv, WSPBrakingVectorEnv, make_core
 
-__all__ = ["WSPBrakingEnv", "WSPBrakingVectorEnv"]
+__all__ = ["WSPBrakingEnv", "WSPBrakingVectorEnv", "make_core"]

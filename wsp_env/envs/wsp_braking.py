@@ -1,42 +1,60 @@
 """``WSPBraking-v0``: wheel slide protection as a Gymnasium environment (single and native vector).
 
+## Description
+
 A train brakes from ``speed_kmh`` to standstill on a rail drawn at ``reset`` (contaminant,
-adhesion level and pattern, load, pad friction, gradient, demand). Every control period
-(20 ms, the BCU cycle) the agent sets each WSP valve; the physics runs 1 ms substeps inside.
+adhesion level and pattern, load, pad friction, gradient, demand). Every control period (20 ms,
+the BCU cycle) the agent sets each WSP valve; the physics runs 1 ms substeps inside
+(``wsp_env.core``: the braking core; ``wsp_env.physics``: the compiled model). The goal is the
+shortest stop without sliding the wheels into flats and without wasting air.
 
-**Action** — ``action_mode="continuous"`` (default): ``Box(-1, 1, (n_valves,), float32)``; valve
-``j`` asks for the fraction ``(a_j + 1) / 2`` of the current demand pressure (the pneumatics
-decide how fast the cylinder gets there; nothing can exceed the demand). Out-of-range values are
-clipped and counted in ``info["action_clipped"]``; a NaN raises ``ValueError``.
-``action_mode="discrete"``: ``MultiDiscrete([3] * n_valves)`` with 0 = vent, 1 = hold,
-2 = fill (apply), like real dump/hold valves. ``action_mode="residual"``: a residual on the
-frozen classical WSP (``configs/wsp/classical.yaml``), which runs inside the environment on the
-same observation: ``Box(-1, 1, (n_valves,))``, valve ``j`` asks for the fraction
-``clip(f_j + residual_scale * a_j, 0, 1)`` of the demand, ``f_j`` the classical WSP's own
-request — so the zero action *is* the classical WSP, and a learner starts from it.
-``residual_deadband`` (0 by default) zeroes residuals up to that size and rescales the rest
-continuously (``sign(a) (|a| - band) / (1 - band)``): a policy's small, ever-changing outputs
-would otherwise move every *hold* a little, and each small drop of the target vents air.
-Valves are per axle, or per bogie with ``valve_group="bogie"``.
+## Action Space
 
-**Observation** — ``Box(-5, 5, float32)``, what a WSP measures, normalised (``v_s`` = vehicle
-maximum speed): per axle the wheel speed ``/ v_s``, the wheel deceleration ``/ 10 m/s^2``, the
-slip against the reference speed ``(v_ref - v_i) / max(v_ref, 1 m/s)``, the cylinder pressure
-``/ p_max``; then the demand ``/ p_max``, the reference speed ``/ v_s`` (fastest wheel, falling
-at most 2.5 m/s^2 — above any dry-rail deceleration, so it is the train speed on good adhesion),
-and the previous valve command. ``privileged=True`` appends the true train speed, each
-axle's friction level and true creepage. ``accelerometer=True`` gives the WSP a body
-accelerometer, as accelerometer-aided WSPs have: the reference speed then falls at the
-deceleration it reads over each period — a specific force, so the gradient's ``g sin(theta)``
-is missing from it, plus a bias drawn per episode within ``+-accelerometer_bias_mps2``
-(0.05 m/s^2) — instead of the fixed limit, and the reading ``/ 10 m/s^2`` is appended to the
-observation. With it the reference follows the train when every wheel slides. With
-``action_mode="residual"`` the classical WSP's requests for this period (one per valve, as
-actions in ``[-1, 1]``) come last of all.
+``action_mode="continuous"`` (default): ``Box(-1, 1, (n_valves,), float32)``; valve ``j`` asks
+for the fraction ``(a_j + 1) / 2`` of the current demand pressure (the pneumatics decide how fast
+the cylinder gets there; nothing can exceed the demand). Out-of-range values are clipped and
+counted in ``info["action_clipped"]``; a NaN raises ``ValueError``.
+``action_mode="discrete"``: ``MultiDiscrete([3] * n_valves)``, 0 = vent, 1 = hold, 2 = fill
+(apply), like real dump/hold valves.
+``action_mode="residual"``: a residual on the frozen classical WSP (``configs/wsp/
+classical.yaml``), which runs inside the environment on the same observation:
+``Box(-1, 1, (n_valves,))``, valve ``j`` asks for ``clip(f_j + residual_scale * a_j, 0, 1)`` of
+the demand, ``f_j`` the classical WSP's own request, so the zero action *is* the classical WSP.
+``residual_deadband`` zeroes residuals up to that size and rescales the rest continuously
+(``sign(a) (|a| - band) / (1 - band)``): small, ever-changing outputs would otherwise move
+every *hold* a little, and each small drop of the target vents air.
+Valves are per axle (``n_valves = n_axles``), or per bogie with ``valve_group="bogie"``.
 
-**Reward** — minus the stop's cost in metres of stopping distance, divided by
-``distance_scale_m`` (100 m); the terms, each in ``info["reward_terms"]``, and their exchange
-rates (``reward``, ``RewardConfig``):
+## Observation Space
+
+``Box(-5, 5, (obs_dim,), float32)``: what a WSP measures, normalised, grouped by channel (all
+wheel speeds, then all decelerations, ...), for a vehicle of ``n`` axles and ``m`` valves.
+``v_s`` is the vehicle's maximum speed, ``a_s = 10 m/s^2``, ``p_max`` the cylinder's maximum
+pressure; ``v_ref`` the environment's reference speed (the fastest wheel, falling at most
+2.5 m/s^2 and rising at most 0.5 m/s^2 — above any dry-rail deceleration, so on good adhesion
+it is the train speed; with ``accelerometer=True`` it falls at the deceleration the body
+accelerometer reads instead).
+
+| index | quantity | unit | normalisation |
+|---|---|---|---|
+| ``0 .. n-1`` | wheel speed of axle ``i`` (``omega_i r_i``) | m/s | ``/ v_s`` |
+| ``n .. 2n-1`` | wheel deceleration of axle ``i`` over the last period | m/s^2 | ``/ a_s``, clipped to +-5 |
+| ``2n .. 3n-1`` | slip against the reference ``(v_ref - v_i)`` | m/s | ``/ max(v_ref, 1 m/s)``, clipped |
+| ``3n .. 4n-1`` | cylinder pressure of axle ``i`` | bar | ``/ p_max`` |
+| ``4n`` | demand pressure | bar | ``/ p_max`` |
+| ``4n+1`` | reference speed ``v_ref`` | m/s | ``/ v_s`` |
+| ``4n+2 .. 4n+m+1`` | previous valve action | - | as the action (discrete: mode - 1) |
+| ``privileged=True``: next ``1 + 2n`` | true train speed ``V``; friction level of axle ``i``; true creepage ``(V - v_i)`` | m/s; -; m/s | ``/ v_s``; none; ``/ max(V, 1 m/s)``, clipped |
+| ``accelerometer=True``: next 1 | the body accelerometer's deceleration over the period (a specific force: the gradient's ``g sin(theta)`` is missing from it, plus a bias drawn per episode within ``+-accelerometer_bias_mps2``) | m/s^2 | ``/ a_s``, clipped |
+| ``action_mode="residual"``: last ``m`` | the classical WSP's requests for this period | - | as actions in ``[-1, 1]`` |
+
+So ``obs_dim = 4n + 2 + m (+ 1 + 2n privileged) (+ 1 accelerometer) (+ m residual)``: 22 for the
+4-axle ``uic_z1`` with per-axle valves.
+
+## Rewards
+
+Minus the stop's cost in metres of stopping distance, divided by ``distance_scale_m`` (100 m).
+Each term is in ``info["reward_terms"]``; their exchange rates are ``reward`` (``RewardConfig``):
 
 * ``distance``  ``-dx``: over an episode it sums to ``-stopping_distance / distance_scale_m``;
 * ``damage``    wheel damage, priced per axle and superlinearly: axle ``i`` with cumulative
@@ -46,34 +64,70 @@ rates (``reward``, ``RewardConfig``):
 * ``lock``      ``lock_m_per_s`` (10 m) per second each axle is locked (a wheel flat);
 * ``air``       ``air_m_per_100l`` (5 m) per 100 free-air litres vented;
 * ``shaping``   a training option, off by default (``shaping_decel_mps2 = 0``): potential-based
-  shaping ``gamma Phi(V') - Phi(V)`` with ``Phi(V) = -V^2 / (2 a0)``, the distance the train
-  would still run at ``a0``, and ``gamma = shaping_gamma`` (set it to the learner's discount).
-  It pays now for the speed a harder brake takes off, which the distance term only pays as the
-  metres are not run, and by Ng, Harada & Russell (1999) leaves the optimal policy unchanged:
-  its *discounted* sum over a stop is exactly ``V0^2 / (2 a0)``, a constant of the scenario
-  (the undiscounted sum is not: with gamma < 1 it grows with the stop's length, so logged
-  episode returns with shaping on are not comparable with returns without it). It reads the
-  true train speed: a reward-only privilege (observations are unchanged);
+  shaping ``gamma Phi(V') - Phi(V)`` with ``Phi(V) = -V^2 / (2 a0)``, ``gamma = shaping_gamma``
+  (set it to the learner's discount). By Ng, Harada & Russell (1999) it leaves the optimal
+  policy unchanged: its *discounted* sum over a stop is ``V0^2 / (2 a0)``, a constant of the
+  scenario (the undiscounted sum is not, so logged returns with shaping on are not comparable
+  with returns without it). It reads the true train speed: a reward-only privilege;
 * ``slide``     an option, off by default (``slide_m_per_s = 0``): metres per second each axle
-  slides deeper than the slide threshold ``max(3 km/h, 20 % V)`` — the time the damage
-  criterion "longest slide" judges, which the sliding energy alone does not price.
+  slides deeper than the slide threshold ``max(3 km/h, 20 % V)``.
 
 With these defaults the classical WSP's return is about nine tenths distance; a locked-wheel
 policy (``none``) and one that brakes less than the demand return clearly less on soap and
-leaves (``tests/test_reward.py``). The episodic sum is what the weights price: every term is
-paid when it happens and a stop lasts 10-90 s (500-4500 steps), so train with a discount whose
-horizon covers a stop (gamma >= 0.999: ~20 s) — with gamma 0.99 (2 s) the distance a harder
-brake saves later is invisible to the step that applies it.
+leaves (``tests/test_reward.py``). A stop lasts 10-90 s (500-4500 steps): train with a
+discount whose horizon covers it (gamma >= 0.999).
 
-**Episodes** — ``terminated`` at standstill, ``truncated`` when ``max_time_s`` of braking has
-passed. ``info["metrics"]`` at the end carries the run's metrics (``metrics.run_metrics``).
-``reset(options=...)`` fixes any drawn parameter (``speed_kmh``, ``rail``, ``mu_contaminated``,
-``pattern``, ``load_factor``, ``pad_factor``, ``gradient_permille``, ``demand``, ``sections``,
-``axle_mu_factor``, ``recovery_basis``).
+## Starting State
 
-The vector class steps all environments in one compiled call and autoresets in the same step
+``reset(seed=..., options=...)`` draws a scenario from ``scenario`` (``ScenarioConfig``: rails
+and their weights, speeds 40 km/h to the vehicle's maximum, load 0.85-1.15, pads 0.9-1.1,
+gradient +-5 per mille, 70 % emergency demand), then the rail's adhesion level and pattern from
+``configs/rails.yaml``. ``options`` fixes any drawn parameter: ``speed_kmh``, ``rail``,
+``mu_contaminated``, ``pattern``, ``load_factor``, ``pad_factor``, ``gradient_permille``,
+``demand`` (``"emergency"`` / ``"service"``), ``sections``, ``axle_mu_factor``,
+``recovery_basis``, ``background``, ``extra_brake_force_N``. The train starts at that speed,
+every wheel rolling, cylinders empty, the demand rising after the brake's delay. ``info`` holds
+``"scenario"``.
+
+## Episode End
+
+``terminated`` at standstill; ``truncated`` when ``max_time_s`` of braking has passed.
+``info["metrics"]`` at the end carries the run's metrics (``core.metrics.run_metrics``:
+stopping distance and time, sliding energy per axle, locks, air, ...). The vector class steps
+all environments in one compiled call and autoresets in the same step
 (``AutoresetMode.SAME_STEP``): an ended environment's last observation and info are in
 ``info["final_obs"]`` / ``info["final_info"]`` (masks ``_final_obs`` / ``_final_info``).
+
+## Arguments
+
+``gymnasium.make("WSPBraking-v0", **kwargs)``, ``gymnasium.make_vec("WSPBraking-v0",
+num_envs=N, **kwargs)``:
+
+| parameter | type | default | description |
+|---|---|---|---|
+| ``vehicle`` | str or VehicleConfig | ``"uic_z1"`` | a ``configs/vehicles`` id or YAML path |
+| ``action_mode`` | str | ``"continuous"`` | ``continuous``, ``discrete`` or ``residual`` (Action Space) |
+| ``residual_scale`` | float | ``1.0`` | residual mode: how far the action moves the classical request, (0, 1] |
+| ``residual_deadband`` | float | ``0.0`` | residual mode: residuals up to this size are zero, [0, 1) |
+| ``valve_group`` | str or None | None | ``axle`` or ``bogie``; None: the vehicle config's |
+| ``privileged`` | bool | False | append true speed, friction levels and creepage (an oracle's view) |
+| ``accelerometer`` | bool | False | the WSP has a body accelerometer (observed; aids the reference) |
+| ``accelerometer_bias_mps2`` | float | ``0.05`` | its bias is drawn per episode within +- this |
+| ``reward`` | RewardConfig or dict | defaults | the reward's exchange rates (Rewards) |
+| ``scenario`` | ScenarioConfig or dict | defaults | what ``reset`` draws from (Starting State) |
+| ``rails_config`` | str or None | None | a rails YAML instead of ``configs/rails.yaml`` |
+| ``extra_rails`` | dict or None | None | further ``RailConfig`` objects by name |
+| ``control_period_s`` | float | ``0.02`` | the BCU cycle: one step |
+| ``substep_s`` | float | ``0.001`` | the physics substep (linearly implicit; docs/physics.md) |
+| ``max_time_s`` | float | ``300.0`` | truncation |
+| ``render_mode`` | str or None | None | ``"rgb_array"``: axle speeds and pressures as an image |
+
+## Version History
+
+* v0: the first registered version: continuous and discrete valve actions, the residual mode
+  on the frozen classical WSP (with ``residual_scale`` / ``residual_deadband``), the optional
+  body accelerometer, privileged observations, distance-damage-lock-air reward with optional
+  potential-based shaping and slide pricing; single and native vector entry points.
 """
 
 from __future__ import annotations
@@ -87,19 +141,55 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from wsp_env.core import kernel as K
-from wsp_env.core.braking import TERM_NAMES, BrakingCore
+from wsp_env.core.braking import TERM_NAMES, BrakingCore, RewardConfig, ScenarioConfig
+from wsp_env.core.config import RailConfig, VehicleConfig
 from wsp_env.envs.rendering import render_core
+
+
+def make_core(n_envs: int, **kwargs: Any) -> BrakingCore:
+    """A :class:`BrakingCore` of ``n_envs`` environments with ``WSPBrakingEnv``'s arguments; with
+    ``action_mode="residual"`` the frozen classical WSP (``configs/wsp/classical.yaml``) is the
+    controller the residual acts on."""
+    if kwargs.get("action_mode") == "residual":
+        from wsp_env.baselines.classical import ClassicalWSP, load_wsp_config
+
+        kwargs["residual_base"] = ClassicalWSP(load_wsp_config())
+    return BrakingCore(n_envs, **kwargs)
 
 
 class WSPBrakingEnv(gym.Env):
     __doc__ = __doc__
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 50}
 
-    def __init__(self, render_mode: str | None = None, **kwargs: Any) -> None:
+    def __init__(
+        self,
+        render_mode: str | None = None,
+        vehicle: str | VehicleConfig = "uic_z1",
+        action_mode: str = "continuous",
+        residual_scale: float = 1.0,
+        residual_deadband: float = 0.0,
+        valve_group: str | None = None,
+        privileged: bool = False,
+        accelerometer: bool = False,
+        accelerometer_bias_mps2: float = 0.05,
+        reward: RewardConfig | dict | None = None,
+        scenario: ScenarioConfig | dict | None = None,
+        rails_config: str | None = None,
+        extra_rails: dict[str, RailConfig] | None = None,
+        control_period_s: float = 0.02,
+        substep_s: float = 1e-3,
+        max_time_s: float = 300.0,
+    ) -> None:
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode: {render_mode!r} (supported: rgb_array)")
         self.render_mode = render_mode
-        self.core = BrakingCore(1, **kwargs)
+        self.core = make_core(
+            1, vehicle=vehicle, action_mode=action_mode, residual_scale=residual_scale,
+            residual_deadband=residual_deadband, valve_group=valve_group, privileged=privileged,
+            accelerometer=accelerometer, accelerometer_bias_mps2=accelerometer_bias_mps2,
+            reward=reward, scenario=scenario, rails_config=rails_config, extra_rails=extra_rails,
+            control_period_s=control_period_s, substep_s=substep_s, max_time_s=max_time_s,
+        )  # fmt: skip
         self.action_space = self.core.action_space()
         self.observation_space = self.core.observation_space()
         self._reward_terms = np.zeros(K.N_TERMS)
@@ -137,7 +227,9 @@ class WSPBrakingEnv(gym.Env):
 
 
 class WSPBrakingVectorEnv(VectorEnv):
-    """``num_envs`` environments stepped by one compiled call; same-step autoreset."""
+    """``num_envs`` environments stepped by one compiled call; same-step autoreset. Arguments
+    as ``WSPBrakingEnv`` (module docstring) plus ``num_envs``; ``max_episode_steps`` (what
+    ``gymnasium.make_vec`` passes from the spec) sets ``max_time_s`` when that is not given."""
 
     metadata: ClassVar[dict[str, Any]] = {
         "render_modes": ["rgb_array"],
@@ -150,13 +242,32 @@ class WSPBrakingVectorEnv(VectorEnv):
         num_envs: int = 1,
         max_episode_steps: int | None = None,
         render_mode: str | None = None,
-        **kwargs: Any,
+        vehicle: str | VehicleConfig = "uic_z1",
+        action_mode: str = "continuous",
+        residual_scale: float = 1.0,
+        residual_deadband: float = 0.0,
+        valve_group: str | None = None,
+        privileged: bool = False,
+        accelerometer: bool = False,
+        accelerometer_bias_mps2: float = 0.05,
+        reward: RewardConfig | dict | None = None,
+        scenario: ScenarioConfig | dict | None = None,
+        rails_config: str | None = None,
+        extra_rails: dict[str, RailConfig] | None = None,
+        control_period_s: float = 0.02,
+        substep_s: float = 1e-3,
+        max_time_s: float | None = None,
     ) -> None:
-        if max_episode_steps is not None:  # gymnasium passes the spec's value; ours is time-based
-            kwargs.setdefault(
-                "max_time_s", max_episode_steps * kwargs.get("control_period_s", 0.02)
-            )
-        self.core = BrakingCore(num_envs, **kwargs)
+        if max_time_s is None:  # gymnasium passes the spec's step limit; ours is time-based
+            steps = max_episode_steps
+            max_time_s = 300.0 if steps is None else steps * control_period_s
+        self.core = make_core(
+            num_envs, vehicle=vehicle, action_mode=action_mode, residual_scale=residual_scale,
+            residual_deadband=residual_deadband, valve_group=valve_group, privileged=privileged,
+            accelerometer=accelerometer, accelerometer_bias_mps2=accelerometer_bias_mps2,
+            reward=reward, scenario=scenario, rails_config=rails_config, extra_rails=extra_rails,
+            control_period_s=control_period_s, substep_s=substep_s, max_time_s=max_time_s,
+        )  # fmt: skip
         self.num_envs = num_envs
         self.render_mode = render_mode
         self.single_action_space = self.core.action_space()

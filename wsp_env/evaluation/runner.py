@@ -20,6 +20,7 @@ from wsp_env.core.config import VehicleConfig, load_rails, load_vehicle
 from wsp_env.core.metrics import run_metrics
 from wsp_env.core.records import CONTAMINANTS, RunRecord
 from wsp_env.core.simulator import VehicleArrays
+from wsp_env.envs import make_core
 from wsp_env.evaluation.reference import (
     deceleration_distance,
     dry_reference_distances,
@@ -122,7 +123,7 @@ def _run_group(
     """The runs of one vehicle, all environments of one batched core, stepped together."""
     # a trained policy brings the settings its spaces need (action mode, valve grouping, ...)
     kwargs = {**(env_kwargs or {}), **getattr(policy, "env_kwargs", {})}
-    core = BrakingCore(len(runs), vehicle=vehicle, max_time_s=max_time_s, **kwargs)
+    core = make_core(len(runs), vehicle=vehicle, max_time_s=max_time_s, **kwargs)
     for e, run in enumerate(runs):
         core.reset_env(e, run.options, seed=run.seed)
     refs = _references(core, max_time_s)

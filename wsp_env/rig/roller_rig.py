@@ -59,6 +59,7 @@ import numpy as np
 from numba import njit
 
 from wsp_env.core.config import ConfigError, VehicleConfig, from_dict, load_vehicle
+from wsp_env.envs import make_core
 from wsp_env.evaluation.runner import one_run
 from wsp_env.evaluation.suites import expand
 from wsp_env.physics import layout as L
@@ -348,7 +349,6 @@ class RollerRig:
         """A braking test from ``speed_kmh`` on the virtual rail ``rail`` with ``policy``
         (anything ``evaluate`` runs); the scenario is drawn as ``runner.run_one`` draws it, so
         the same call there gives the virtual track's own stop."""
-        from wsp_env.core.braking import BrakingCore
 
         cfg, veh = self.cfg, self.vehicle
         suite, kwargs = one_run(rail, speed_kmh, seed, case, env_kwargs, name="rig")
@@ -356,7 +356,7 @@ class RollerRig:
         kwargs.update(getattr(policy, "env_kwargs", {}))
         kwargs.setdefault("max_time_s", max_time_s)
         kwargs.setdefault("substep_s", cfg.control_period_s)  # the virtual vehicle's step
-        core = BrakingCore(1, vehicle=veh, **kwargs)
+        core = make_core(1, vehicle=veh, **kwargs)
         core.reset_env(0, run.options, seed=run.seed)
         policy.bind(core)
         policy.reset(np.array([0]))
@@ -445,18 +445,7 @@ class RollerRig:
             while sim.env_state[0, L.ES_STOPPED] == 0.0 and sim.time_s[0] < kwargs["max_time_s"]:
                 sim.step()
         wall = time.perf_counter() - wall
-        rec = record[:n_rec]
-        names = ["v_ws_kmh", "v_hat_kmh", "v_wheel_kmh", "p_cyl_bar", "C_s_Nm", "C_hat_Nm",
-                 "T_sim_N", "T_mis_N", "u_Nm"]  # fmt: skip
-        record_out = {"time_s": rec[:, 0], "v_train_kmh": rec[:, 1] / KMH, "x_m": rec[:, 2],
-                      "p_demand_bar": rec[:, 3]}  # fmt: skip
-        for i, name in enumerate(names):
-            block = rec[:, N_REC_BASE + i * na : N_REC_BASE + (i + 1) * na]
-            record_out[name] = block / KMH if name.endswith("_kmh") else block
-        # seed 002's T (force of the wheel on the roller) is -F: record the seed's sign
-        record_out["T_sim_N"] = -record_out["T_sim_N"]
-        record_out["T_mis_N"] = -record_out["T_mis_N"]
-        record = record_out
+        record = _record_columns(record[:n_rec], na)
         sq_e_omega, max_e_omega = acc[:, A_EW2], acc[:, A_EWMAX]
         sq_e_c, max_e_c = acc[:, A_EC2], acc[:, A_ECMAX]
         slide_int, slide_sq = acc[:, A_SLIDE], acc[:, A_SLIDE2]
@@ -492,6 +481,21 @@ class RollerRig:
             "rig": dataclasses.asdict(cfg),
         }
         return RigResult(summary=summary, record=record)
+
+
+def _record_columns(rec: np.ndarray, na: int) -> dict[str, np.ndarray]:
+    """The rig's recorded rows as named columns (speeds in km/h; seed 002's signs)."""
+    names = ["v_ws_kmh", "v_hat_kmh", "v_wheel_kmh", "p_cyl_bar", "C_s_Nm", "C_hat_Nm",
+             "T_sim_N", "T_mis_N", "u_Nm"]  # fmt: skip
+    out = {"time_s": rec[:, 0], "v_train_kmh": rec[:, 1] / KMH, "x_m": rec[:, 2],
+           "p_demand_bar": rec[:, 3]}  # fmt: skip
+    for i, name in enumerate(names):
+        block = rec[:, N_REC_BASE + i * na : N_REC_BASE + (i + 1) * na]
+        out[name] = block / KMH if name.endswith("_kmh") else block
+    # seed 002's T (force of the wheel on the roller) is -F: record the seed's sign
+    out["T_sim_N"] = -out["T_sim_N"]
+    out["T_mis_N"] = -out["T_mis_N"]
+    return out
 
 
 def rig_test(

@@ -44,10 +44,9 @@ def _actor_module(policy: SB3Policy) -> Any:
         raise ValueError(f"policy {policy.name}: export supports continuous (Box) actions only")
     dim = int(np.prod(policy.model.observation_space.shape))
     n_stack = policy.n_stack
-    if policy._obs_rms is not None and policy._norm_obs:
-        mean = np.tile(policy._obs_rms.mean, n_stack)
-        scale = np.tile(np.sqrt(policy._obs_rms.var + policy._epsilon), n_stack)
-        clip = policy._clip_obs
+    norm = policy.normalisation()
+    if norm is not None:
+        mean, scale, clip = np.tile(norm[0], n_stack), np.tile(norm[1], n_stack), norm[2]
     else:
         mean, scale, clip = np.zeros(dim), np.ones(dim), np.inf
 

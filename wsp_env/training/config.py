@@ -1,0 +1,320 @@
+"""``wsp-env train``'s config (``configs/train/NAME.yaml``): parsing and checking every field
+before anything runs (a mistake is one line naming the file and field), the algorithm classes
+and the keyword arguments the config gives them. The format is described in ``train.py``'s
+docstring and ``docs/training.md``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import inspect
+import math
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from wsp_env.core.config import ConfigError, configs_root, read_yaml
+
+ALGO_NAMES = ("ppo", "sac", "td3", "a2c", "recurrent_ppo", "tqc")  # the last two: sb3-contrib
+OFF_POLICY = ("sac", "td3", "tqc")
+RECURRENT = ("recurrent_ppo",)
+ACTIVATIONS = ("tanh", "relu", "elu", "leaky_relu", "gelu")
+POLICY_KWARGS = (
+    "net_arch", "activation_fn", "log_std_init", "ortho_init", "n_critics", "n_quantiles",
+    "lstm_hidden_size", "n_lstm_layers", "enable_critic_lstm", "shared_lstm",
+)  # fmt: skip
+# keyword arguments of the algorithm that the trainer sets itself
+MANAGED = ("policy", "env", "seed", "policy_kwargs", "tensorboard_log", "verbose", "device")
+ENV_KWARGS = (
+    "vehicle", "action_mode", "residual_scale", "residual_deadband", "valve_group", "privileged",
+    "accelerometer", "accelerometer_bias_mps2", "reward", "scenario", "rails_config",
+    "control_period_s", "substep_s", "max_time_s",
+)  # fmt: skip
+SCHEDULE = re.compile(r"^lin_([0-9.eE+-]+)$")
+JUDGING_SUITES = ("heldout", "en15595")  # never used for model selection
+
+
+# ---- config ---------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class EvalConfig:
+    suite: str = "validation"
+    every_timesteps: int = field(default=500_000, metadata={"gt": 0})
+    # the judging suites (JUDGING_SUITES) are refused by name once loaded (Validator)
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """A validated training config (module docstring); ``hyperparams`` go to the algorithm."""
+
+    algo: str
+    n_timesteps: int
+    policy: str = "MlpPolicy"
+    n_envs: int = 64
+    frame_stack: int = 1
+    seed: int = 0
+    normalize: dict[str, Any] | None = None
+    policy_kwargs: dict[str, Any] = field(default_factory=dict)
+    hyperparams: dict[str, Any] = field(default_factory=dict)
+    env_kwargs: dict[str, Any] = field(default_factory=dict)
+    eval: EvalConfig = field(default_factory=EvalConfig)
+    checkpoint_every_timesteps: int = 1_000_000
+    source: str = ""  # the file it came from (for messages)
+    pretrain: Any = None  # imitation.PretrainConfig: a warm start before learning (fresh runs)
+
+    def as_yaml_dict(self) -> dict[str, Any]:
+        """The config as a file would hold it (what ``config.yaml`` in a run folder keeps)."""
+        out: dict[str, Any] = {"algo": self.algo, "policy": self.policy, "n_envs": self.n_envs,
+                               "n_timesteps": self.n_timesteps, "seed": self.seed,
+                               "frame_stack": self.frame_stack}  # fmt: skip
+        out["normalize"] = self.normalize if self.normalize is not None else False
+        if self.policy_kwargs:
+            out["policy_kwargs"] = self.policy_kwargs
+        out.update(self.hyperparams)
+        out["env_kwargs"] = self.env_kwargs
+        out["eval"] = dataclasses.asdict(self.eval)
+        out["checkpoint_every_timesteps"] = self.checkpoint_every_timesteps
+        if self.pretrain is not None:
+            out["pretrain"] = dataclasses.asdict(self.pretrain)
+        return out
+
+
+def _algo_class(name: str) -> type:
+    if name in ("recurrent_ppo", "tqc"):
+        import sb3_contrib
+
+        return {"recurrent_ppo": sb3_contrib.RecurrentPPO, "tqc": sb3_contrib.TQC}[name]
+    import stable_baselines3 as sb3
+
+    return {"ppo": sb3.PPO, "sac": sb3.SAC, "td3": sb3.TD3, "a2c": sb3.A2C}[name]
+
+
+_RUN_CLASSES: dict[str, type] = {}
+
+
+def algo_class(name: str) -> type:
+    """The algorithm with schedules driven by the *run's* progress (``run_total_timesteps``),
+    not by one ``learn`` call's: a run trained in chunks (``--chunk-timesteps``, ``--resume``)
+    follows the same learning-rate and clip-range schedule as one trained in one go."""
+    if name not in _RUN_CLASSES:
+        base = _algo_class(name)
+
+        def _update_current_progress_remaining(
+            self: Any, num_timesteps: int, total_timesteps: int
+        ) -> None:
+            total = getattr(self, "run_total_timesteps", None) or total_timesteps
+            self._current_progress_remaining = 1.0 - float(num_timesteps) / float(total)
+
+        _RUN_CLASSES[name] = type(
+            base.__name__,
+            (base,),
+            {"_update_current_progress_remaining": _update_current_progress_remaining},
+        )
+    return _RUN_CLASSES[name]
+
+
+def _int(value: Any, where: str, low: int = 1) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or value < low:
+        raise ConfigError(f"{where}: expected an integer >= {low}, got {value!r}")
+    return value
+
+
+def parse_schedule(value: Any, where: str) -> Any:
+    """``lin_X`` -> a linear schedule from X to 0 (SB3 progress 1 -> 0); numbers pass."""
+    if isinstance(value, str) and value.startswith("lin_"):
+        m = SCHEDULE.match(value)
+        if m is None:
+            raise ConfigError(f"{where}: {value!r} is not lin_<number>")
+        try:
+            start = float(m.group(1))
+        except ValueError:
+            raise ConfigError(f"{where}: {value!r} is not lin_<number>") from None
+        if not math.isfinite(start):
+            raise ConfigError(f"{where}: {value!r} is not lin_<number>")
+        return LinearSchedule(start)
+    return value
+
+
+@dataclass(frozen=True)
+class LinearSchedule:
+    """``start * progress_remaining`` (picklable, so saved models load anywhere)."""
+
+    start: float
+
+    def __call__(self, progress_remaining: float) -> float:
+        return self.start * progress_remaining
+
+
+def load_train_config(path: str | Path) -> TrainConfig:
+    """Read and check a training config; errors name the file and the field."""
+    p = Path(path)
+    if p.suffix not in (".yaml", ".yml") and not p.exists():
+        p = configs_root() / "train" / f"{path}.yaml"
+    if not p.exists():
+        raise ConfigError(f"{path}: no such training config")
+    data = read_yaml(p)
+    try:
+        return parse_train_config(data, str(p))
+    except ConfigError as err:
+        raise ConfigError(f"{p}: {err}") from None
+
+
+def parse_train_config(data: Any, source: str = "") -> TrainConfig:
+    from wsp_env.core.config import from_dict
+
+    if not isinstance(data, dict):
+        raise ConfigError("(top level): expected a mapping")
+    data = dict(data)
+    algo = data.pop("algo", None)
+    if algo not in ALGO_NAMES:
+        raise ConfigError(f"algo: {algo!r} is not one of {', '.join(ALGO_NAMES)}")
+    if "n_timesteps" not in data:
+        raise ConfigError("n_timesteps: missing required field")
+    n_timesteps = _int(data.pop("n_timesteps"), "n_timesteps")
+    want = "MlpLstmPolicy" if algo in RECURRENT else "MlpPolicy"
+    policy = data.pop("policy", want)
+    if policy != want:
+        raise ConfigError(f"policy: {policy!r} is not {want} (flat observations, {algo})")
+    n_envs = _int(data.pop("n_envs", 64), "n_envs")
+    frame_stack = _int(data.pop("frame_stack", 1), "frame_stack")
+    seed = _int(data.pop("seed", 0), "seed", low=0)
+    normalize = data.pop("normalize", False)
+    if normalize is True:
+        normalize = {}
+    elif normalize is False or normalize is None:
+        normalize = None
+    elif isinstance(normalize, dict):
+        from stable_baselines3.common.vec_env import VecNormalize
+
+        allowed = set(inspect.signature(VecNormalize.__init__).parameters) - {"self", "venv"}
+        for k in normalize:
+            if k not in allowed:
+                raise ConfigError(f"normalize.{k}: unknown (allowed: {', '.join(sorted(allowed))})")
+    else:
+        raise ConfigError(f"normalize: expected true, false or a mapping, got {normalize!r}")
+    policy_kwargs = data.pop("policy_kwargs", {}) or {}
+    if not isinstance(policy_kwargs, dict):
+        raise ConfigError(f"policy_kwargs: expected a mapping, got {policy_kwargs!r}")
+    for k, v in policy_kwargs.items():
+        if k not in POLICY_KWARGS:
+            raise ConfigError(f"policy_kwargs.{k}: unknown (allowed: {', '.join(POLICY_KWARGS)})")
+        if k == "activation_fn" and v not in ACTIVATIONS:
+            raise ConfigError(f"policy_kwargs.activation_fn: {v!r} is not one of "
+                              f"{', '.join(ACTIVATIONS)}")  # fmt: skip
+        if k == "net_arch" and not _is_net_arch(v):
+            raise ConfigError(
+                "policy_kwargs.net_arch: expected a list of layer sizes or a mapping of them "
+                f"(pi/vf/qf), got {v!r}"
+            )
+    env_kwargs = data.pop("env_kwargs", {}) or {}
+    if not isinstance(env_kwargs, dict):
+        raise ConfigError(f"env_kwargs: expected a mapping, got {env_kwargs!r}")
+    for k in env_kwargs:
+        if k not in ENV_KWARGS:
+            raise ConfigError(f"env_kwargs.{k}: unknown (allowed: {', '.join(ENV_KWARGS)})")
+    eval_cfg = from_dict(EvalConfig, data.pop("eval", {}) or {}, "eval")
+    pretrain_cfg = None
+    if data.get("pretrain") is not None:
+        from wsp_env.training.imitation import PretrainConfig
+
+        pretrain_cfg = from_dict(PretrainConfig, data.pop("pretrain"), "pretrain")
+        if pretrain_cfg.steps_per_round < n_envs:
+            raise ConfigError(f"pretrain.steps_per_round: {pretrain_cfg.steps_per_round} is "
+                              f"fewer than one step of the {n_envs} environments")  # fmt: skip
+        if algo not in ("ppo", "a2c"):
+            raise ConfigError(
+                f"pretrain: a warm start of the actor-critic of ppo or a2c, not {algo}"
+            )
+        if env_kwargs.get("action_mode", "continuous") != "continuous":
+            raise ConfigError("pretrain: needs env_kwargs.action_mode continuous (the teacher's "
+                              "actions are valve fractions)")  # fmt: skip
+    data.pop("pretrain", None)
+    every = _int(data.pop("checkpoint_every_timesteps", 1_000_000), "checkpoint_every_timesteps")
+    try:
+        cls = _algo_class(algo)
+    except ImportError as err:
+        raise ConfigError(f"algo: {algo} needs a package that is not installed ({err})") from None
+    params = inspect.signature(cls.__init__).parameters
+    allowed = set(params) - {"self", *MANAGED}
+    hyper = {}
+    for k, v in data.items():
+        if k not in allowed:
+            raise ConfigError(f"{k}: unknown field (neither a trainer field nor a {algo} "
+                              f"hyperparameter)")  # fmt: skip
+        _check_hyperparameter(k, v, params[k].default)
+        hyper[k] = v
+    cfg = TrainConfig(algo, n_timesteps, policy, n_envs, frame_stack, seed, normalize,
+                      policy_kwargs, hyper, env_kwargs, eval_cfg, every, source,
+                      pretrain_cfg)  # fmt: skip
+    check_env_kwargs(cfg.env_kwargs)
+    reward = cfg.env_kwargs.get("reward") or {}
+    if isinstance(reward, dict) and float(reward.get("shaping_decel_mps2", 0.0) or 0.0) > 0.0:
+        gamma = float(hyper.get("gamma", params["gamma"].default))
+        shaping_gamma = float(reward.get("shaping_gamma", 0.999))
+        if abs(gamma - shaping_gamma) > 1e-12:
+            raise ConfigError(
+                f"env_kwargs.reward.shaping_gamma: {shaping_gamma} differs from the learner's "
+                f"gamma {gamma} (the shaping leaves the best policy unchanged only at the "
+                "learner's discount)"
+            )
+    return cfg
+
+
+SCHEDULABLE = ("learning_rate", "clip_range", "clip_range_vf")
+
+
+def _check_hyperparameter(name: str, value: Any, default: Any) -> None:
+    """Types that SB3 would only trip over inside ``learn``: numbers where the default is a
+    number (a ``lin_X`` schedule where SB3 takes one), true/false where it is a flag."""
+    if isinstance(value, str) and value.startswith("lin_"):
+        if name not in SCHEDULABLE:
+            raise ConfigError(f"{name}: a schedule ({value!r}) is not allowed here")
+        parse_schedule(value, name)
+        return
+    if isinstance(default, bool):
+        if not isinstance(value, bool):
+            raise ConfigError(f"{name}: expected true or false, got {value!r}")
+    elif isinstance(default, int | float) and default is not None:
+        number = isinstance(value, int | float) and not isinstance(value, bool)
+        if not number or not math.isfinite(float(value)):
+            raise ConfigError(f"{name}: expected a number, got {value!r}")
+
+
+def _is_net_arch(v: Any) -> bool:
+    def sizes(x: Any) -> bool:
+        return isinstance(x, list) and all(isinstance(n, int) and n > 0 for n in x)
+
+    return sizes(v) or (isinstance(v, dict) and all(sizes(x) for x in v.values()))
+
+
+def check_env_kwargs(env_kwargs: dict[str, Any]) -> None:
+    """Build one environment from ``env_kwargs``: every field checked by the environment."""
+    from wsp_env.envs import make_core
+
+    try:
+        make_core(1, **env_kwargs)
+    except ConfigError as err:
+        raise ConfigError(f"env_kwargs.{err}") from None
+    except (ValueError, TypeError) as err:
+        raise ConfigError(f"env_kwargs: {err}") from None
+
+
+def algo_hyperparams(cfg: TrainConfig) -> dict[str, Any]:
+    out = {}
+    for k, v in cfg.hyperparams.items():
+        out[k] = parse_schedule(v, k)
+    return out
+
+
+def algo_policy_kwargs(cfg: TrainConfig) -> dict[str, Any]:
+    import torch
+
+    out = dict(cfg.policy_kwargs)
+    if "activation_fn" in out:
+        out["activation_fn"] = {
+            "tanh": torch.nn.Tanh, "relu": torch.nn.ReLU, "elu": torch.nn.ELU,
+            "leaky_relu": torch.nn.LeakyReLU, "gelu": torch.nn.GELU,
+        }[out["activation_fn"]]  # fmt: skip
+    return out
