@@ -28,7 +28,7 @@ OIL = load_rail("oil")
 OIL_STEP = ((0.0, 500.0, 0.667), (500.0, 5000.0, 1.0))
 
 
-def _trace(tmp_path, name, seed=0, speed=120.0, sensors=SENSORS, rail=SOAP, **effect):
+def synthetic_trace(tmp_path, name, seed=0, speed=120.0, sensors=SENSORS, rail=SOAP, **effect):
     effect.setdefault("mu_contaminated", 0.08 if rail is SOAP else 0.06)
     csv_path, _, _ = simulate_trace(
         tmp_path / name, rail, speed, sensors=sensors, seed=seed, pattern="uniform", **effect
@@ -40,7 +40,9 @@ def _trace(tmp_path, name, seed=0, speed=120.0, sensors=SENSORS, rail=SOAP, **ef
     "seed,speed,rail", [(0, 120.0, SOAP), (1, 100.0, SOAP), (2, 140.0, SOAP), (0, 120.0, OIL)]
 )
 def test_no_extra_effect_nothing_added(tmp_path, seed, speed, rail):
-    assert discover(read_trace(_trace(tmp_path, "clean", seed, speed, rail=rail))).added == []
+    assert (
+        discover(read_trace(synthetic_trace(tmp_path, "clean", seed, speed, rail=rail))).added == []
+    )
 
 
 @pytest.mark.parametrize("seed,speed", [(0, 120.0), (1, 100.0), (2, 140.0)])
@@ -48,7 +50,7 @@ def test_rail_cleaning_is_reported_as_per_axle_adhesion(tmp_path, seed, speed):
     """Soap with rail cleaning (sliding leading axles clean the rail for the trailing ones):
     nothing is added but adhesion_per_axle, and where it is, the rear bogie has the better grip
     (seed 000 Table 4)."""
-    path = _trace(tmp_path, "cleaning", seed, speed, rail=load_rail("soap"))
+    path = synthetic_trace(tmp_path, "cleaning", seed, speed, rail=load_rail("soap"))
     added = discover(read_trace(path)).added
     assert {s.category for s in added} <= {"adhesion_per_axle"}
     for step in added:
@@ -113,7 +115,7 @@ def test_rail_cleaning_is_reported_as_per_axle_adhesion(tmp_path, seed, speed):
     ],
 )
 def test_undeclared_effect_is_named(tmp_path, effect, category, check):
-    result = discover(read_trace(_trace(tmp_path, category, **effect)))
+    result = discover(read_trace(synthetic_trace(tmp_path, category, **effect)))
     assert [s.category for s in result.added] == [category]
     step = result.added[0]
     key, value, rel = check
@@ -129,14 +131,14 @@ def test_monotone_axle_factors_are_the_base_laws_cleaning(tmp_path, rail):
     looks like: the base law carries it (DESIGN §3) and no effect is added; its gain, the
     rear's over the front's less one, comes back within 25 % of 1 / 0.6 - 1 (the law's
     saturating shape is not the injected linear one)."""
-    result = discover(read_trace(_trace(tmp_path, "ri", rail=rail,
+    result = discover(read_trace(synthetic_trace(tmp_path, "ri", rail=rail,
                                         axle_mu_factor=(0.6, 0.75, 0.9, 1.0))))  # fmt: skip
     assert result.added == []
     assert result.adhesion_law["cleaning_gain"] == pytest.approx(1 / 0.6 - 1, rel=0.25)
 
 
 def test_two_effects_at_once(tmp_path):
-    path = _trace(
+    path = synthetic_trace(
         tmp_path, "two", gradient_permille=-10.0, wheel_radius_error=(0.0, 0.0, 0.012, 0.0)
     )
     result = discover(read_trace(path))
@@ -144,7 +146,7 @@ def test_two_effects_at_once(tmp_path):
 
 
 def test_calibrate_cli_writes_the_contract(tmp_path, capsys):
-    path = _trace(tmp_path, "cli", gradient_permille=-12.0)
+    path = synthetic_trace(tmp_path, "cli", gradient_permille=-12.0)
     out = tmp_path / "cal.json"
     assert main(["calibrate", str(path), "--json", str(out)]) == 0
     data = json.loads(out.read_text())
@@ -173,7 +175,9 @@ def test_calibrate_report_and_export_load_in_the_env(tmp_path):
 
     import wsp_env  # noqa: F401
 
-    path = _trace(tmp_path, "exp", gradient_permille=-10.0, axle_mu_factor=(0.6, 0.75, 0.9, 1.0))
+    path = synthetic_trace(
+        tmp_path, "exp", gradient_permille=-10.0, axle_mu_factor=(0.6, 0.75, 0.9, 1.0)
+    )
     rails, report = tmp_path / "calibrated.yaml", tmp_path / "report"
     assert main(["calibrate", str(path), "--export", str(rails), "--report", str(report)]) == 0
     options = yaml.safe_load((tmp_path / "calibrated.yaml.options.yaml").read_text())
@@ -188,7 +192,7 @@ def test_calibrate_report_and_export_load_in_the_env(tmp_path):
     text = (report / "report.md").read_text()
     assert "gradient" in text and (report / "adhesion_curves.png").exists()
     # a plain soap stop: the base law recovers, and the export carries it
-    plain = _trace(tmp_path, "plain")
+    plain = synthetic_trace(tmp_path, "plain")
     assert main(["calibrate", str(plain), "--export", str(tmp_path / "plain.yaml")]) == 0
     rail = yaml.safe_load((tmp_path / "plain.yaml").read_text())["calibrated"]
     assert rail["recovery"]["basis"] == "sliding_power" and rail["recovery"]["gain"] >= 1.0
@@ -246,8 +250,10 @@ def test_loop_holds_beyond_its_own_generator(tmp_path, variant):
         from wsp_env.core.config import configs_root
 
         kwargs["wsp_config"] = str(configs_root() / "wsp" / "seed002_uic_z1.yaml")
-    clean = _trace(tmp_path, "clean", seed=3, sensors=sensors, **kwargs)
-    sloped = _trace(tmp_path, "sloped", seed=3, sensors=sensors, gradient_permille=grade, **kwargs)
+    clean = synthetic_trace(tmp_path, "clean", seed=3, sensors=sensors, **kwargs)
+    sloped = synthetic_trace(
+        tmp_path, "sloped", seed=3, sensors=sensors, gradient_permille=grade, **kwargs
+    )
     if variant == "vendor_names":
         clean, sloped = _to_vendor_names(clean), _to_vendor_names(sloped)
 
@@ -269,13 +275,13 @@ def test_loop_holds_beyond_its_own_generator(tmp_path, variant):
 def test_effect_outside_the_library_is_reported_not_misnamed(tmp_path):
     """A periodic ground-speed error (no candidate has its shape): at most the sensor family is
     named (the coasting creep sees a speed error), and the balance is reported unexplained."""
-    result = discover(read_trace(_trace(tmp_path, "ripple", speed_ripple_kmh=1.5)))
+    result = discover(read_trace(synthetic_trace(tmp_path, "ripple", speed_ripple_kmh=1.5)))
     assert {s.category for s in result.added} <= {"sensor"}
     assert "train_speed_balance_kmh" in [u["channel"] for u in result.unexplained]
 
 
 def test_clean_trace_leaves_nothing_unexplained(tmp_path):
-    assert discover(read_trace(_trace(tmp_path, "clean_u", seed=4))).unexplained == []
+    assert discover(read_trace(synthetic_trace(tmp_path, "clean_u", seed=4))).unexplained == []
 
 
 @pytest.mark.parametrize("grade,pad", [(-15.0, 0.95), (-4.0, 0.8)])
@@ -286,7 +292,9 @@ def test_two_effects_on_the_same_channel(tmp_path, grade, pad):
     distinguished only by the build-up and the WSP's modulation), so the gradient comes back to
     +-1.5 permille rather than the +-0.1 of a gradient alone."""
     result = discover(
-        read_trace(_trace(tmp_path, f"g{grade}", seed=2, gradient_permille=grade, pad_factor=pad))
+        read_trace(
+            synthetic_trace(tmp_path, f"g{grade}", seed=2, gradient_permille=grade, pad_factor=pad)
+        )
     )
     found = {s.category: s.parameters for s in result.added}
     assert set(found) == {"gradient", "pad_friction"}
@@ -339,7 +347,7 @@ def test_calibrated_config_reproduces_the_measured_stop(tmp_path, effect):
     from wsp_env.evaluation.runner import run_one
     from wsp_env.policy import make_policy
 
-    path = _trace(tmp_path, "loop", **effect)
+    path = synthetic_trace(tmp_path, "loop", **effect)
     rails = tmp_path / "calibrated.yaml"
     assert main(["calibrate", str(path), "--export", str(rails)]) == 0
     options = yaml.safe_load((tmp_path / "calibrated.yaml.options.yaml").read_text())

@@ -96,7 +96,7 @@ def test_a_stop_that_never_slides_gets_no_friction_step(tmp_path, seed):
     """Clean seeds 0 (wet rail) and 18 (dry, 12 axles) of the power study: the wheels never
     reach the adhesion limit, so their critical points trace the brake's ramp up the creep
     curve's initial slope, which a step on the rail (with an absurd base law) once fitted. A
-    friction step needs slides (``discovery.STEP_MIN_SLIDES``) and evidence on both sides."""
+    friction step needs slides (``adhesion_model.STEP_MIN_SLIDES``) and evidence on both sides."""
     trace, _, _ = independent_trace(tmp_path, seed)
     assert "adhesion_position" not in [s.category for s in discover(trace).added]
 
@@ -244,7 +244,7 @@ def test_a_late_ground_speed_is_not_taken_for_a_late_brake(tmp_path, seed):
 )
 def test_the_loggers_own_timing_is_no_effect(tmp_path, seed, reason):
     """A force effect must earn its place against a sub-resolution lag fitted alongside, and a
-    lag must be told from one (``discovery._timing_verdict``, ``_lag_beyond_timing``)."""
+    lag must be told from one (``balance_effects.timing_verdict``, ``lag_beyond_timing``)."""
     trace, _, _ = independent_trace(tmp_path, seed)
     result = discover(trace)
     assert [s.category for s in result.added] == []
@@ -306,7 +306,9 @@ def test_a_gradient_survives_a_resistance_that_only_compensated(tmp_path, seed):
     weak and the compensating effect then for good (as propelling, or as negligible once the
     scale is in). A weak effect comes back when the effect it was weak beside is dropped for
     good."""
-    trace, (grad, _), _ = independent_trace(tmp_path, seed, [("gradient", 6.0), ("sensor_scale", 0.02)])
+    trace, (grad, _), _ = independent_trace(
+        tmp_path, seed, [("gradient", 6.0), ("sensor_scale", 0.02)]
+    )
     result = discover(trace)
     found = {s.category: s.parameters for s in result.added}
     assert set(found) == {"gradient", "sensor"}, found
@@ -321,7 +323,7 @@ def test_a_rail_cleaned_along_the_train_is_no_per_axle_effect(tmp_path, seed):
     """Held-out clean seeds (soap, 4 axles, 55 and 28 slides): the generator's rail cleaning
     made the trailing axles grippier in a shape the base law's one-parameter cleaning misses
     (1 / 1.00 / 1.19 / 1.42); per-axle factors that a monotone rise fits as well are nominal
-    (``discovery._cleaning_explains``). One axle off the others is still found
+    (``adhesion_model.cleaning_explains``). One axle off the others is still found
     (``test_discovery.test_undeclared_effect_is_named``)."""
     result = discover(independent_trace(tmp_path, seed)[0])
     assert result.added == []

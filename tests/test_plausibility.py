@@ -8,9 +8,10 @@ import json
 
 import numpy as np
 import pytest
-from test_discovery import _trace
+from test_discovery import synthetic_trace
 
-from wsp_env.calibration.discovery import Result, Step, _retest_balance, discover
+from wsp_env.calibration.balance_retest import retest_balance
+from wsp_env.calibration.discovery import Result, Step, discover
 from wsp_env.calibration.plausibility import implausible, negligible, negligible_force
 from wsp_env.calibration.residuals import channels
 from wsp_env.calibration.traces import read_trace
@@ -19,7 +20,7 @@ from wsp_env.cli import main
 
 @pytest.fixture(scope="module")
 def gradient_trace(tmp_path_factory):
-    return read_trace(_trace(tmp_path_factory.mktemp("g"), "g", gradient_permille=-10.0))
+    return read_trace(synthetic_trace(tmp_path_factory.mktemp("g"), "g", gradient_permille=-10.0))
 
 
 @pytest.mark.parametrize(
@@ -74,7 +75,7 @@ def test_a_compensating_effect_is_dropped_by_the_retest(gradient_trace):
     grade = Step("gradient", "gradient", ch.name + "_kmh", {"gradient_permille": 0.0},
                  0.5 * rmse, 0.01, -50.0)  # fmt: skip
     result.added = [force, grade]
-    res = _retest_balance(trace, result, ch.residual, ch.mask)
+    res = retest_balance(trace, result, ch.residual, ch.mask)
     assert [s.category for s in result.added] == ["gradient"]
     assert result.dropped[0]["category"] == "unmeasured_brake_force"
     assert "re-test" in result.dropped[0]["reason"]
@@ -107,7 +108,7 @@ def test_a_channel_without_samples_is_reported_not_used(gradient_trace):
 
 
 def test_calibrate_json_carries_channels_and_dropped(tmp_path):
-    path = _trace(tmp_path, "cli", gradient_permille=-8.0)
+    path = synthetic_trace(tmp_path, "cli", gradient_permille=-8.0)
     out = tmp_path / "cal.json"
     assert main(["calibrate", str(path), "--json", str(out)]) == 0
     data = json.loads(out.read_text())

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from wsp_env.calibration.traces import TraceError, _averaged_updates, read_trace
+from wsp_env.calibration.traces import TraceError, averaged_updates, read_trace
 from wsp_env.core.config import load_vehicle
 from wsp_env.evaluation.runner import run_one, trace_metadata
 from wsp_env.evaluation.trace_writer import SensorModel, sample_run, write_trace
@@ -241,14 +241,14 @@ def test_a_held_or_averaged_gps_is_put_back_on_time(mode, fix_period_s, log_peri
     period on one draw), so there the mean over the six draws is within 20 ms (the reader
     before this change dropped the holding logger's single fixes as blends: -22 ms mean,
     -48 ms on one draw, at 5 Hz logged at 10 Hz)."""
-    from wsp_env.calibration.traces import _unhold
+    from wsp_env.calibration.traces import unhold
 
     lags = np.arange(-0.3, 0.6, 0.001)
     found = []
     for seed in range(6):
         t, v, truth = _logged_gps(mode, fix_period_s, log_period_s, seed)
         notes: list[str] = []
-        out, _, _ = _unhold(v, t, notes)
+        out, _, _ = unhold(v, t, notes)
         assert notes and ("averaged" in notes[0]) == (mode == "mean")
         moving = (t > 2.0) & (out > 5.0)
         err = [np.mean((out[moving] - truth(t[moving] - lag)) ** 2) for lag in lags]
@@ -272,7 +272,7 @@ def test_an_averaged_gps_without_repeats_is_told_by_its_update_interval(fix_peri
     for seed in range(6):
         t, v, truth = _logged_gps("mean", fix_period_s, log_period_s, seed, 0.1, 0.002)
         notes: list[str] = []
-        found = _averaged_updates(v, t, notes)
+        found = averaged_updates(v, t, notes)
         assert found is not None and found[0] == pytest.approx(fix_period_s), seed
         assert found[1] == pytest.approx(0.1, rel=0.35), seed  # one update's noise
         assert notes and "averaged" in notes[0]
@@ -287,12 +287,12 @@ def test_a_speed_updated_every_sample_is_no_averaged_update(seed):
     """A 10 Hz fix averaged at 10 Hz, and a smooth speed with independent noise on every
     sample, are no held signal: the reader finds no update interval and notes nothing."""
     t, v, _ = _logged_gps("mean", 0.1, 0.1, seed, 0.1, 0.002)
-    assert _averaged_updates(v, t, []) is None
+    assert averaged_updates(v, t, []) is None
     rng = np.random.default_rng(seed)
     t = np.arange(0.0, 30.0, 0.1)
     v = np.round(120.0 - 3.6 * t + 0.02 * t**2 + rng.normal(0.0, 0.1, t.size), 2)
     notes: list[str] = []
-    assert _averaged_updates(v, t, notes) is None and not notes
+    assert averaged_updates(v, t, notes) is None and not notes
 
 
 def test_a_ground_speed_lag_is_judged_beyond_the_loggers_part(trace_dir):
@@ -316,10 +316,10 @@ def test_a_constant_or_held_speed_is_no_averaged_update(trace_dir):
     notes: list[str] = []
     t = np.arange(0.0, 20.0, 0.1)
     v = np.full(t.size, 80.0)
-    assert _averaged_updates(v, t, notes) is None and not notes
-    from wsp_env.calibration.traces import _unhold
+    assert averaged_updates(v, t, notes) is None and not notes
+    from wsp_env.calibration.traces import unhold
 
-    _, noise, interval = _unhold(v, t, notes)
+    _, noise, interval = unhold(v, t, notes)
     assert noise is None and interval is not None and not np.isfinite(interval)
     header, rows, meta = _load(trace_dir)
     col = header.index("v_train_kmh")

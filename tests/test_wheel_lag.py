@@ -8,14 +8,14 @@ import dataclasses
 
 import numpy as np
 import pytest
-from test_independent_traces import independent_trace as independent_trace
+from test_independent_traces import independent_trace
 
 from wsp_env.calibration.discovery import discover
 from wsp_env.calibration.wheel_lag import wheel_lag
 
 
-def independent_trace(tmp_path, seed, effects=(), **overrides):
-    """The independent generator's trace, read back (``test_independent_traces.independent_trace``)."""
+def _trace(tmp_path, seed, effects=(), **overrides):
+    """The independent generator's trace, read back (``test_independent_traces``)."""
     return independent_trace(tmp_path, seed, effects, **overrides)[0]
 
 
@@ -23,7 +23,7 @@ def independent_trace(tmp_path, seed, effects=(), **overrides):
 def test_the_wheels_measure_a_brake_that_follows_the_pressure_late(tmp_path, seed, lag):
     """Within 0.05 s (the logger's own sampling reads +-0.04 s on clean traces: an averaging
     logger and a sample-and-hold one place the pressure and the wheels a little apart)."""
-    w = wheel_lag(independent_trace(tmp_path, seed, [("pressure_lag", lag)], contaminant="soap"))
+    w = wheel_lag(_trace(tmp_path, seed, [("pressure_lag", lag)], contaminant="soap"))
     assert w is not None and w.episodes >= 4
     assert w.lag_s == pytest.approx(lag, abs=0.05)
     assert w.se_s < 0.05
@@ -31,7 +31,7 @@ def test_the_wheels_measure_a_brake_that_follows_the_pressure_late(tmp_path, see
 
 @pytest.mark.parametrize("seed", [1, 2, 3])
 def test_on_a_clean_stop_the_wheels_answer_the_pressure_at_once(tmp_path, seed):
-    w = wheel_lag(independent_trace(tmp_path, seed, contaminant="soap"))
+    w = wheel_lag(_trace(tmp_path, seed, contaminant="soap"))
     assert w is not None
     assert abs(w.lag_s) < 0.05
 
@@ -40,7 +40,7 @@ def test_a_late_ground_speed_does_not_enter(tmp_path):
     """0.4 s of ground-speed lag: the wheels still read the brake on time; and replacing the
     ground speed altogether leaves the estimate exactly as it was (slides are judged against
     the fastest axle), as does a pad scale (it multiplies the torque)."""
-    trace = independent_trace(tmp_path, 81003, [("sensor_lag", 0.4)], contaminant="soap")
+    trace = _trace(tmp_path, 81003, [("sensor_lag", 0.4)], contaminant="soap")
     w = wheel_lag(trace)
     assert w is not None and abs(w.lag_s) < 0.05
     other = dataclasses.replace(trace, v_train_kmh=np.roll(trace.v_train_kmh, 7) * 1.05)
@@ -53,7 +53,7 @@ def test_a_late_ground_speed_does_not_enter(tmp_path):
 
 def test_a_stop_without_slides_measures_nothing(tmp_path):
     """Clean seed 0 of the power study: a wet rail, no wheel slides, no valve acts."""
-    assert wheel_lag(independent_trace(tmp_path, 0)) is None
+    assert wheel_lag(_trace(tmp_path, 0)) is None
 
 
 # pressure lags of 0.2 s the balance missed: three under its noise floor (an averaging logger
@@ -61,7 +61,7 @@ def test_a_stop_without_slides_measures_nothing(tmp_path):
 # taken for a late ground speed (the two are twins on the balance)
 @pytest.mark.parametrize("seed", [61001, 61017, 61005, 61015])
 def test_a_pressure_lag_the_balance_missed_is_found_on_the_wheels(tmp_path, seed):
-    trace = independent_trace(tmp_path, seed, [("pressure_lag", 0.2)])
+    trace = _trace(tmp_path, seed, [("pressure_lag", 0.2)])
     result = discover(trace)
     cats = [s.category for s in result.added]
     assert cats == ["pressure_lag"], [(s.category, s.parameters) for s in result.added]
@@ -76,7 +76,7 @@ def test_a_pressure_lag_the_balance_missed_is_found_on_the_wheels(tmp_path, seed
 # what the force left, only undid it; with the wheels' lag the force is refitted alongside it
 @pytest.mark.parametrize("seed", [502009, 502018])
 def test_a_lag_the_wheels_measured_is_found_under_a_force_effect(tmp_path, seed):
-    trace = independent_trace(tmp_path, seed, [("unmeasured_brake_force", 4000.0), ("pressure_lag", 0.3)])
+    trace = _trace(tmp_path, seed, [("unmeasured_brake_force", 4000.0), ("pressure_lag", 0.3)])
     result = discover(trace)
     found = {s.category: s for s in result.added if s.channel == "train_speed_balance_kmh"}
     assert set(found) == {"unmeasured_brake_force", "pressure_lag"}, list(found)

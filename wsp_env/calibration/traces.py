@@ -55,11 +55,11 @@ class Trace:
     # None: measure it on the samples (``ground_speed_noise_kmh``)
     v_train_noise_kmh: float | None = None
     # the interval (s) between the ground speed's updates where the reader found them held or
-    # averaged (``_unhold``, ``_averaged_updates``); None: every sample is an update
+    # averaged (``unhold``, ``averaged_updates``); None: every sample is an update
     v_train_update_s: float | None = None
     # how far (s) the column as read trails the train by its logging alone: half an update
     # interval where updates were averaged over the log period and left as logged
-    # (``_averaged_updates``), else 0 (held updates are put back on time by ``_unhold``)
+    # (``averaged_updates``), else 0 (held updates are put back on time by ``unhold``)
     v_train_logger_lag_s: float = 0.0
     # the noise (km/h) of one update where the reader found updates (held: as
     # ``v_train_noise_kmh``; averaged: measured on the fitted levels, while the samples' own
@@ -329,7 +329,7 @@ def read_trace(csv_path: str | Path) -> Trace:
             f"column 'time_s': not strictly increasing at line {int(bad[0]) + 3} "
             f"({t[bad[0]]:g} -> {t[bad[0] + 1]:g})",
         )
-    gap_filled = np.isnan(cols["v_train_kmh"])  # filled samples are no GPS update (_unhold)
+    gap_filled = np.isnan(cols["v_train_kmh"])  # filled samples are no GPS update (unhold)
     for name in required[1:]:
         cols[name] = _fill_gaps(path, name, cols[name], t, notes)
     for name in _OPTIONAL:
@@ -340,10 +340,10 @@ def read_trace(csv_path: str | Path) -> Trace:
             else:
                 cols[name] = _fill_gaps(path, name, cols[name], t, notes)
     _check_units(path, meta, cols, n)
-    cols["v_train_kmh"], v_noise, v_update = _unhold(cols["v_train_kmh"], t, notes, gap_filled)
+    cols["v_train_kmh"], v_noise, v_update = unhold(cols["v_train_kmh"], t, notes, gap_filled)
     v_logger_lag, v_update_noise = 0.0, v_noise
     if v_update is None:  # nothing held: perhaps updates averaged over the log period
-        averaged = _averaged_updates(cols["v_train_kmh"], t, notes, gap_filled)
+        averaged = averaged_updates(cols["v_train_kmh"], t, notes, gap_filled)
         if averaged is not None:
             v_update, v_update_noise = averaged
             v_logger_lag = 0.5 * v_update
@@ -368,7 +368,7 @@ HELD_FRACTION = 0.3  # of the moving samples repeating the previous value exactl
 BLEND_SINGLES_FRACTION = 0.3
 
 
-def _unhold(
+def unhold(
     v: np.ndarray, t: np.ndarray, notes: list[str], filled: np.ndarray | None = None
 ) -> tuple[np.ndarray, float | None, float | None]:
     """A ground speed held between updates (a GPS fix every 0.1-1 s, logged faster, or held
@@ -431,7 +431,7 @@ def _unhold(
 
 
 # GPS update intervals (s) a logger may average without showing repeats (1.5-3.5 log periods:
-# shorter ones are the log's own rate, longer ones leave held samples for ``_unhold``)
+# shorter ones are the log's own rate, longer ones leave held samples for ``unhold``)
 GPS_INTERVALS_S = (0.1, 0.125, 0.2, 0.25, 0.5)
 # the held-and-averaged model must leave at most this fraction of what a smooth curve with as
 # many parameters leaves (measured on the independent generator: 5 Hz fixes averaged at 10 Hz
@@ -470,12 +470,12 @@ def _ls_rss(design: sparse.csr_matrix, v: np.ndarray) -> tuple[float, np.ndarray
     return float(e @ e), coef
 
 
-def _averaged_updates(
+def averaged_updates(
     v: np.ndarray, t: np.ndarray, notes: list[str], filled: np.ndarray | None = None
 ) -> tuple[float, float | None] | None:
     """The update interval and the noise of one update of a GPS speed updated every ``P`` (a
     few log periods, ``GPS_INTERVALS_S``) and averaged over each log period, or None. Such a
-    column repeats no sample for ``_unhold`` to find (a 5 Hz fix logged at 10 Hz: a blend of
+    column repeats no sample for ``unhold`` to find (a 5 Hz fix logged at 10 Hz: a blend of
     two fixes, then the new fix alone), yet it trails the train by half an update more than
     the other averaged columns (the pressures): ~0.1 s, a ground-speed lag in every trace that
     is the logger's, not the sensor's.

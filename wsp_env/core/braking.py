@@ -230,6 +230,9 @@ class BrakingCore:
             env_acc=sim.env_acc, axle_acc=sim.axle_acc, wsp=self.wsp, prev_wheel=self.prev_wheel,
             prev_action=self.prev_action, obs=self._kobs, terms=self.terms, flags=self.flags,
         )  # fmt: skip
+        self._step_args = K.step_args(
+            sim.n_sub, sim.dt_s, sim.control_period_s, self.params, self.state
+        )
 
     # ---- observation ------------------------------------------------------------------------
 
@@ -402,12 +405,8 @@ class BrakingCore:
 
     def step(self, actions: np.ndarray) -> None:
         """One control period of every environment (checked ``actions``, ``check_actions``)."""
-        sim = self.sim
         actions, clipped = self.compose(actions)
-        K.env_step(
-            self._step_fn, self.mode, actions, sim.n_sub, sim.dt_s, sim.control_period_s,
-            self.params, self.state,
-        )  # fmt: skip
+        self._step_fn(self.mode, actions, *self._step_args)
         if clipped is not None:  # residual mode
             self.flags[:, K.F_CLIPPED] = clipped
             self._base_stale = True

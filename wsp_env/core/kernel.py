@@ -9,8 +9,7 @@ Its arrays travel in two named bundles, in the spirit of gymnax's ``EnvParams`` 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 from numba import njit, prange
@@ -367,21 +366,14 @@ def env_step_parallel(*args):
         _env_step_one(e, *args)
 
 
-def env_step(
-    fn: Callable[..., None],
-    mode: int,
-    actions: np.ndarray,
-    n_sub: int,
-    dt_s: float,
-    control_period_s: float,
-    p: Params,
-    s: State,
-) -> None:
-    """One control period of every environment through ``fn`` (``env_step_serial`` or
-    ``env_step_parallel``): the bundles unpacked in the compiled entry points' order."""
-    fn(
-        mode, actions, p.valve_of_axle, n_sub, dt_s, control_period_s, s.cmd, p.env_par,
-        p.axle_par, p.sections, s.env_state, s.axle_state, s.field, s.env_acc, s.axle_acc, s.wsp,
+def step_args(
+    n_sub: int, dt_s: float, control_period_s: float, p: Params, s: State
+) -> tuple[Any, ...]:
+    """The compiled entry points' arguments after ``(mode, actions)``, in their order: built
+    once per core (the arrays are updated in place), so that a step unpacks one tuple."""
+    return (
+        p.valve_of_axle, n_sub, dt_s, control_period_s, s.cmd, p.env_par, p.axle_par,
+        p.sections, s.env_state, s.axle_state, s.field, s.env_acc, s.axle_acc, s.wsp,
         s.prev_wheel, s.prev_action, p.obs_par, p.reward_par, s.obs, s.terms, s.flags,
     )  # fmt: skip
 
