@@ -121,7 +121,7 @@ class SlipTracker:
 
 
 class RailAwareTracker:
-    """A privileged teacher for imitation (``wsp_env/imitation.py``): where the rail's adhesion
+    """A privileged teacher for imitation (``training/imitation.py``): where the rail's adhesion
     recovers under sliding (soap: seed 002 Eqs. 9-14) it holds every axle at a constant sliding
     speed (``slide_kmh``: the slide pays, it lifts the adhesion) down to
     ``min_slide_speed_kmh``, elsewhere (leaves, oil, wet, and the last metres) at the peak of the

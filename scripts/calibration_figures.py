@@ -1,13 +1,15 @@
-"""Print the calibration loop's measured figures that the tests do not assert — the README's and
-the closing notes' numbers on the adhesion channel.
+"""Print the calibration loop's measured figures that the tests do not assert — the figures
+docs/calibration.md quotes on the adhesion channel.
 
-    .venv/bin/python scripts/calibration_figures.py            # about 1 minute
+    .venv/bin/python scripts/calibration_figures.py [--markdown docs/results/calibration_figures.md]
+
+``--markdown P`` also writes the printed figures there, with the command and the machine above.
 
 1. Force at the critical points against the simulator's own adhesion force (Eq. 9 rail, no
    recovery or cleaning, no sensor noise), next to the per-sample estimate with a
    Savitzky–Golay wheel deceleration that the critical points replace.
 2. The adhesion channel's floor on traces without an injected effect, and the largest cut any
-   adhesion candidate reaches there (the 1/3 bar of ``discovery.MIN_REDUCTION_ADHESION``).
+   adhesion candidate reaches there (the 1/3 bar of ``adhesion_model.MIN_REDUCTION_ADHESION``).
 3. Injected effects (a gradient; adhesion effects on soap, where the floor is higher, and on
    oil): the effect named first, its parameters and the cut of its channel.
 4. Polach parameter recovery: seed 000 Table 4's law on the ETR 1000 (no recovery or
@@ -20,6 +22,7 @@ the closing notes' numbers on the adhesion channel.
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import dataclasses
 import io
@@ -31,6 +34,7 @@ from pathlib import Path
 
 import numpy as np
 import yaml
+from _results_md import fenced, tee_stdout, write_results
 from scipy.integrate import cumulative_trapezoid
 from scipy.signal import savgol_filter
 
@@ -251,13 +255,21 @@ def runtime(directory: Path) -> None:
 
 
 def main() -> None:
-    with tempfile.TemporaryDirectory() as tmp:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--markdown", type=Path, default=None, help="also write the figures here")
+    args = ap.parse_args()
+    t0 = time.perf_counter()
+    with tempfile.TemporaryDirectory() as tmp, tee_stdout() as printed:
         directory = Path(tmp)
         force_estimate(directory)
         floors(directory)
         parameter_recovery(directory)
         closed_loop(directory)
         runtime(directory)
+    if args.markdown is not None:
+        title = "Calibration loop: measured figures"
+        write_results(args.markdown, title, fenced(printed.getvalue()), time.perf_counter() - t0)
+        print(f"wrote {args.markdown}")
 
 
 if __name__ == "__main__":

@@ -124,7 +124,9 @@ def _true_and_found(effect: Any, step: dict[str, Any], trace_meta: dict) -> tupl
     return math.nan, math.nan
 
 
-def scaled_effect(ind: Any, category: str, magnitude: float, rng: np.random.Generator, sc: Any) -> Any:
+def scaled_effect(
+    ind: Any, category: str, magnitude: float, rng: np.random.Generator, sc: Any
+) -> Any:
     """The generator's effect for a grid magnitude: pad friction and the rail's friction
     change are fractions off 1 here (weaker or stronger, rail worse or better: sign drawn),
     factors in the generator."""

@@ -1,12 +1,12 @@
 """How big a friction step a clean rail shows: the null distribution a friction-change detector
-would have to beat on traces of the independent generator (README "Calibration on independent
-traces", issue 11).
+would have to beat on traces of the independent generator (docs/calibration.md, "Calibration on
+independent traces"; issue 11).
 
 For each trace, the critical points at a slide (sliding by ``SLIDE_POINT_KMH`` or more: the
 adhesion limit, ``adhesion_estimate.pooled_points``) are fitted as ``log mu = a_axle + b V +
 c [x >= x_s]``: one level per axle (the rail each axle sees, cleaned by the axles ahead), a
 linear train-speed trend and a step at a rail position ``x_s`` (the position under the axle,
-``discovery._axle_offsets_m``), on a grid of ``STEP_GRID`` quantiles of the points' positions
+``adhesion_model.axle_offsets_m``), on a grid of ``STEP_GRID`` quantiles of the points' positions
 with ``MIN_SIDE`` points or more on each side; the best step's factor ``exp(c)`` and its z
 (ordinary least-squares standard error). This is deliberately simpler than the loop's own
 step candidate (no Eq. 9 law, no recovery): it reads a step near the truth on most friction-
@@ -50,7 +50,7 @@ def step_reading(trace: Trace) -> dict[str, float] | None:
     """The best step in ``log mu`` at the trace's slide points (module docstring), or None
     where there are fewer than ``MIN_POINTS`` or no position leaves ``MIN_SIDE`` a side."""
     from wsp_env.calibration.adhesion_estimate import pooled_points
-    from wsp_env.calibration.discovery import _axle_offsets_m
+    from wsp_env.calibration.adhesion_model import axle_offsets_m
     from wsp_env.calibration.residuals import MIN_SPEED_KMH
 
     pts = pooled_points(trace, MIN_SPEED_KMH)
@@ -58,7 +58,7 @@ def step_reading(trace: Trace) -> dict[str, float] | None:
     if at_slide.sum() < MIN_POINTS:
         return None
     axle = pts.axle[at_slide]
-    rail_m = (pts.position_m - _axle_offsets_m(trace)[pts.axle])[at_slide]
+    rail_m = (pts.position_m - axle_offsets_m(trace)[pts.axle])[at_slide]
     speed = trace.v_train_kmh[pts.sample][at_slide] / 100.0
     y = np.log(pts.mu[at_slide])
     base = np.column_stack([(axle == a).astype(float) for a in np.unique(axle)] + [speed])
@@ -82,7 +82,7 @@ def step_reading(trace: Trace) -> dict[str, float] | None:
             "z": c / se if se > 0 else 0.0}  # fmt: skip
 
 
-def _one(job: dict[str, Any]) -> dict[str, Any]:
+def run_job(job: dict[str, Any]) -> dict[str, Any]:
     os.environ.setdefault("NUMBA_NUM_THREADS", "1")
     from wsp_env.calibration import independent as ind
     from wsp_env.calibration.traces import read_trace
@@ -90,7 +90,7 @@ def _one(job: dict[str, Any]) -> dict[str, Any]:
     rng = np.random.default_rng(job["seed"])
     rail = cp.sliding_rail(job["seed"])
     scenario = ind.random_scenario(rng, contaminant=rail)
-    effects = [cp._effect(ind, c, m, rng, scenario) for c, m in job["effects"]]
+    effects = [cp.scaled_effect(ind, c, m, rng, scenario) for c, m in job["effects"]]
     columns, meta = ind.generate(scenario, effects, seed=job["seed"])
     with tempfile.TemporaryDirectory() as tmp:
         csv_path, _ = ind.write_trace(Path(tmp) / "t", columns, meta)
@@ -149,7 +149,7 @@ def main(argv: list[str] | None = None) -> int:
               "seed": base + 10_000 * (ci + 1) + 1000 * mi + k}
              for k in range(args.scenarios)]  # fmt: skip
     with ProcessPoolExecutor(max_workers=max(1, args.jobs)) as pool:
-        rows = list(pool.map(_one, jobs))
+        rows = list(pool.map(run_job, jobs))
     clean = [r for r in rows if r["kind"] == "clean"]
     steps = [r for r in rows if r["kind"] == "step"]
     for name, rs in (("clean", clean), (f"+-{100 * args.magnitude:g} %", steps)):

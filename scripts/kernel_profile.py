@@ -1,15 +1,18 @@
 """Where the physics kernel's time goes: time it with one part at a time switched off.
 
-    .venv/bin/python scripts/kernel_profile.py        # ~1 minute, pins itself to one core
+    .venv/bin/python scripts/kernel_profile.py [--markdown docs/results/kernel_profile.md]
+        # ~1 minute, pins itself to one core
 
 Each variant recompiles ``wsp_env/physics/integrator.py`` with one piece replaced by a trivial
 stand-in, runs 256 environments (mixed rails, random valve commands) from the same state, and
 reports the best of 12 timings in ns per axle and substep. The differences to ``base`` are the
 parts' costs. Variants are physically wrong on purpose: this is a profile, not a simulation.
+``--markdown P`` also writes the printed figures there, with the command and the machine above.
 """
 
 from __future__ import annotations
 
+import argparse
 import os
 import subprocess
 import sys
@@ -18,6 +21,7 @@ import types
 from pathlib import Path
 
 import numpy as np
+from _results_md import fenced, tee_stdout, write_results
 
 SOURCE = Path(__file__).resolve().parent.parent / "wsp_env/physics/integrator.py"
 VARIANTS = {
@@ -83,9 +87,22 @@ def time_variant(name: str) -> float:
 
 
 def main() -> None:
-    if len(sys.argv) > 1:  # child process: one variant
+    if len(sys.argv) > 1 and not sys.argv[1].startswith("-"):  # child process: one variant
         print(f"{time_variant(sys.argv[1]):.1f}")
         return
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--markdown", default=None, help="also write the figures here")
+    args = ap.parse_args()
+    t0 = time.perf_counter()
+    with tee_stdout() as printed:
+        profile()
+    if args.markdown:
+        title = "Where the physics kernel's time goes"
+        write_results(args.markdown, title, fenced(printed.getvalue()), time.perf_counter() - t0)
+        print(f"wrote {args.markdown}")
+
+
+def profile() -> None:
     env = dict(os.environ, OPENBLAS_NUM_THREADS="1")
     base = None
     for name in VARIANTS:

@@ -2,19 +2,22 @@
 classical WSP against the learned policy, same scenario and seed (the evaluation's code path).
 
     .venv/bin/python scripts/learned_figures.py [--policy ppo_bc_uic_z1] \
-        [--out docs/learned_vs_classical.png]
+        [--out docs/learned_vs_classical.png] [--markdown docs/results/learned_figures.md]
 
 Prints per run and policy the stop, each axle's mean sliding (seed 002 Eq. 23), the time any
 axle slides deeper than 10 km/h, the sliding energy and the air; the figure shows the axle
-speeds against the train speed and the cylinder pressures against the demand.
+speeds against the train speed and the cylinder pressures against the demand. ``--markdown P``
+also writes the printed figures there, with the command and the machine above.
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import time
 
 import numpy as np
+from _results_md import fenced, tee_stdout, write_results
 
 from wsp_env.evaluation import load_suite, run_suite
 from wsp_env.policy import make_policy
@@ -27,7 +30,18 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--policy", default="ppo_bc_uic_z1")
     ap.add_argument("--out", default="docs/learned_vs_classical.png")
+    ap.add_argument("--markdown", default=None, help="also write the printed figures here")
     args = ap.parse_args()
+    t0 = time.perf_counter()
+    with tee_stdout() as printed:
+        figures(args)
+    if args.markdown:
+        title = f"Where `{args.policy}`'s gain comes from"
+        write_results(args.markdown, title, fenced(printed.getvalue()), time.perf_counter() - t0)
+        print(f"wrote {args.markdown}")
+
+
+def figures(args: argparse.Namespace) -> None:
     heldout = load_suite("heldout")
     cases = tuple(
         dataclasses.replace(c, speeds_kmh=(f"{v:g}",))

@@ -1,8 +1,8 @@
-"""The README's learned-controller results: a learned policy against the frozen classical WSP
-(and `none`, `oracle`) on `heldout`, plus a check on random scenarios nobody chose.
+"""The learned-controller results: a learned policy against the frozen classical WSP (and
+`none`, `oracle`) on `heldout`, plus a check on random scenarios nobody chose.
 
-    .venv/bin/python scripts/learned_tables.py [--policy ppo_residual_uic_z1] [--random 60]
-        [--json runs/learned_tables.json]
+    .venv/bin/python scripts/learned_tables.py [--policy ppo_bc_uic_z1] [--random 60]
+        [--json runs/learned_tables.json] [--markdown docs/results/learned_tables.md]
 
 Every policy runs through `evaluation.run_suite` (one code path, the same scenarios and seeds).
 Per `heldout` scenario: mean and 95 % interval of the mean over the seeds (Student t, 3 seeds:
@@ -14,8 +14,10 @@ all its speeds and seeds) more than 5 % longer.
 `--random N`: N scenarios drawn by a seeded generator (seed 20261123, never a training or
 suite seed) from every rail of `configs/rails.yaml` (level uniform in the rail's range, its
 patterns), 40 km/h to the vehicle's maximum, loads 0.85-1.15, emergency or service demand,
-gradients +-5 permille; learned against classical, per contaminant. About 4 minutes on a
-2-core machine with `--random 60`.
+gradients +-5 permille; learned against classical, per contaminant.
+
+`--markdown P` writes the tables with the command and the machine above them (the docs quote
+`docs/results/learned_tables.md`).
 """
 
 from __future__ import annotations
@@ -23,10 +25,12 @@ from __future__ import annotations
 import argparse
 import json
 import statistics
+import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from _results_md import write_results
 from scipy import stats
 
 from wsp_env.core.config import from_dict, load_rails, load_vehicle
@@ -237,17 +241,36 @@ def random_table(learned: str, n: int) -> tuple[str, dict[str, Any]]:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--policy", default="ppo_residual_uic_z1", help="learned policy (name/path)")
+    ap.add_argument("--policy", default="ppo_bc_uic_z1", help="learned policy (name/path)")
     ap.add_argument("--random", type=int, default=60, help="random scenarios (0: none)")
     ap.add_argument("--json", default=None, help="write every result here")
+    ap.add_argument("--markdown", default=None, help="write the tables here (.md)")
     args = ap.parse_args()
+    t0 = time.perf_counter()
     text, data = heldout_table(["none", "classical", "oracle", args.policy], args.policy)
     print(text)
+    sections = [
+        "## `heldout`\n\nEvery policy through `evaluation.run_suite` (the same scenarios and "
+        "seeds); uic_z1; mean ± half-width of the 95 % Student-t interval of the mean over the "
+        "suite's 3 seeds. Then the means over all runs, and the acceptance against the classical "
+        f"WSP.\n\n{text}\n"
+    ]
     if args.random:
         rtext, rdata = random_table(args.policy, args.random)
         print(f"\nRandom scenarios ({args.random}, seed {RANDOM_SEED}):\n")
         print(rtext)
         data["random"] = rdata
+        sections.append(
+            f"## {args.random} random scenarios\n\nDrawn by a seeded generator (seed "
+            f"{RANDOM_SEED}, never a training or suite seed) over every rail of "
+            "`configs/rails.yaml`, its levels and patterns, 40 km/h to the vehicle's maximum, "
+            "loads 0.85-1.15, emergency or service demand, gradients ±5 ‰; "
+            f"`{args.policy}` against `classical`, per rail.\n\n{rtext}\n"
+        )
+    if args.markdown:
+        title = f"Learned (`{args.policy}`) against classical"
+        write_results(args.markdown, title, "\n".join(sections), time.perf_counter() - t0)
+        print(f"wrote {args.markdown}")
     if args.json:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
         Path(args.json).write_text(json.dumps(data, indent=1, default=float))

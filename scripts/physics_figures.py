@@ -1,17 +1,21 @@
-"""Print the physics core's measured figures (accuracy and speed) — the README's numbers.
+"""Print the physics core's measured figures (accuracy and speed) — docs/physics.md's numbers.
 
-    .venv/bin/python scripts/physics_figures.py            # about 1-2 minutes
+    .venv/bin/python scripts/physics_figures.py [--markdown docs/results/physics_figures.md]
 
-Speed figures are medians over repeated runs on this machine.
+Speed figures are medians over repeated runs on this machine. ``--markdown P`` also writes the
+printed figures there, with the command and the machine above.
 """
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 import statistics
 import time
+from pathlib import Path
 
 import numpy as np
+from _results_md import fenced, tee_stdout, write_results
 
 from wsp_env.core.config import load_rail, load_vehicle
 from wsp_env.core.metrics import run_metrics
@@ -34,6 +38,19 @@ def stop(vehicle, rail, speed=120.0, dt=1e-3, n_envs=1, cmd_fn=None):
 
 
 def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--markdown", type=Path, default=None, help="also write the figures here")
+    args = ap.parse_args()
+    t0 = time.perf_counter()
+    with tee_stdout() as printed:
+        figures()
+    if args.markdown is not None:
+        title = "Physics core: accuracy and speed"
+        write_results(args.markdown, title, fenced(printed.getvalue()), time.perf_counter() - t0)
+        print(f"wrote {args.markdown}")
+
+
+def figures() -> None:
     veh = load_vehicle("uic_z1")
     inst = dataclasses.replace(
         veh,

@@ -1,6 +1,7 @@
 """Seed 002 braking test B1-B2 (§4.2, §5.2): UIC-Z1, 120 km/h, soap, Table 5 held fixed.
 
     .venv/bin/python scripts/seed002_reproduction.py            # result, readings, plot (~15 s)
+        [--markdown docs/results/seed002_reproduction.md]        # also write the printout there
     .venv/bin/python scripts/seed002_reproduction.py --search --n 300 \
         --write configs/wsp/seed002_uic_z1.yaml                  # the test WSP's fit (~2 min)
 
@@ -16,9 +17,11 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import time
 from pathlib import Path
 
 import numpy as np
+from _results_md import fenced, tee_stdout, write_results
 
 from wsp_env.baselines.classical import ClassicalWSP, WSPConfig, load_wsp_config
 from wsp_env.core.config import configs_root, load_rails
@@ -101,10 +104,21 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", default="runs/seed002")
     ap.add_argument("--write", type=Path, help="--search: save the best thresholds here")
+    ap.add_argument("--markdown", type=Path, default=None, help="also write the printout here")
     args = ap.parse_args()
     if args.search:
         search(args.n, args.seed, args.write)
         return
+    t0 = time.perf_counter()
+    with tee_stdout() as printed:
+        reproduce(args)
+    if args.markdown is not None:
+        title = "Seed 002 braking test reproduction"
+        write_results(args.markdown, title, fenced(printed.getvalue()), time.perf_counter() - t0)
+        print(f"wrote {args.markdown}")
+
+
+def reproduce(args: argparse.Namespace) -> None:
     wsp = load_wsp_config(WSP_CONFIG)
     result, records = run(wsp, record=True)
     s, slide = score(result)

@@ -14,7 +14,7 @@ outside Table 10's T2-T1 span. About 0.2 s per candidate on one core.
 Findings. At Table 8's level under axle 1 with the braking tables' recovery reading
 (``--n 150 --seed 0``, 2026-11-23): no setting brings axles 2 and 3 near Table 9 (best -1.73 /
 -0.19 / -0.29 / -0.17 km/h): the sliding-power recovery holds them at ~0.3 km/h of slip. With
-the readings of ``wsp_env/traction.py`` (axle 1 at R_1 mu_c = 0.0846, Eqs. 9-10 as written:
+the readings of ``wsp_env/rig/traction.py`` (axle 1 at R_1 mu_c = 0.0846, Eqs. 9-10 as written:
 ``--mu-contaminated 0.0846 --recovery-basis wheel_metre``) ``--n 80 --seed 2`` finds
 -2.46 / -0.57 / -0.94 / -0.26 km/h and 168.0 m, inside every envelope; that search wrote
 ``configs/antiskid/e402b_seed002.yaml``.

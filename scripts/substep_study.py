@@ -1,11 +1,17 @@
 """Stopping distance against the physics substep: 1, 2 and 4 ms vs a 0.1 ms reference.
 
-.venv/bin/python scripts/substep_study.py        # ~2 minutes
+.venv/bin/python scripts/substep_study.py [--markdown docs/results/substep_study.md]
+
+``--markdown P`` also writes the printed figures there, with the command and the machine above.
 """
 
 from __future__ import annotations
 
+import argparse
+import time
+
 import numpy as np
+from _results_md import fenced, tee_stdout, write_results
 
 from wsp_env.core.config import load_rail, load_vehicle
 from wsp_env.core.simulator import RunSetup, TrainSim
@@ -31,6 +37,19 @@ def stop_distance(rail: str, dt: float, cmd) -> float:
 
 
 def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--markdown", default=None, help="also write the figures here")
+    args = ap.parse_args()
+    t0 = time.perf_counter()
+    with tee_stdout() as printed:
+        study()
+    if args.markdown:
+        title = "Stopping distance against the physics substep"
+        write_results(args.markdown, title, fenced(printed.getvalue()), time.perf_counter() - t0)
+        print(f"wrote {args.markdown}")
+
+
+def study() -> None:
     rand = np.random.default_rng(5).uniform(0, 1, size=(20000, 1, 4)) ** 0.5
     cases = [("soap", None, "no WSP"), ("soap", pulse, "pulsed"), ("leaves", pulse, "pulsed"),
              ("wet", pulse, "pulsed"), ("soap", lambda n: rand[n], "random"),

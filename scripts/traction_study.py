@@ -1,4 +1,4 @@
-"""The traction test's soap curve and sliding under variants of the rail (README "Traction").
+"""The traction test's soap curve and sliding under variants of the rail (docs/traction.md).
 
     .venv/bin/python scripts/traction_study.py      # a few seconds
 

@@ -1,4 +1,4 @@
-"""The detection-power study (``scripts/calibration_power.py``, README "Calibration on
+"""The detection-power study (``scripts/calibration_power.py``, docs/calibration.md "Calibration on
 independent traces") runs end to end on a tiny grid and reports what the README quotes from it:
 detection, the adhesion candidates' readings against the generator's truth, false positives."""
 

@@ -2,7 +2,7 @@
 generator (``calibration/independent.py``: its own vehicle model, Burckhardt friction law,
 rail cleaning, WSP and logger quirks, sharing no code with ``wsp_env/physics``) and a fixed
 subset of ``scripts/calibration_power.py``'s grid, small enough for CI. The full study and its
-figures are in the README ("Calibration on independent traces")."""
+figures are in docs/calibration.md ("Calibration on independent traces")."""
 
 from __future__ import annotations
 

@@ -373,7 +373,7 @@ def _add_train(sub: argparse._SubParsersAction) -> None:
         help="train a learned WSP controller (stable-baselines3) from a YAML config",
         description="Train PPO / SAC / TD3 / A2C on WSPBraking-v0's native vector env, with "
         "periodic validation against the frozen classical WSP, best-model selection and "
-        "checkpoints; --resume continues a run bit for bit. See wsp_env/training.py.",
+        "checkpoints; --resume continues a run bit for bit. See docs/training.md.",
     )
     p.add_argument("--config", default=None, help="configs/train/NAME.yaml (or a built-in NAME)")
     p.add_argument("--out", default=None, help="run folder (new or empty; default: --resume's)")
@@ -505,7 +505,7 @@ def _add_rig(sub: argparse._SubParsersAction) -> None:
         description="Runs a WSP (any policy evaluate runs) on a physical vehicle standing on a "
         "full-scale roller rig whose rollers make its wheels feel the virtual track's degraded "
         "adhesion (seed 002 §3: rig, estimator Eqs. 20-21, sliding-mode controller Eqs. 16-19), "
-        "and the same policy and scenario on the virtual track alone. See wsp_env/rig.py.",
+        "and the same policy and scenario on the virtual track alone. See docs/rig.md.",
     )
     p.add_argument("--vehicle", default="uic_z1", help="vehicle id or YAML path (uic_z1)")
     p.add_argument(
@@ -580,7 +580,7 @@ def _add_traction(sub: argparse._SubParsersAction) -> None:
         help="a start on a contaminated rail with the anti-skid device (seed 002 traction test)",
         description="The traction phase (seed 002 §3.1.4, §5.3): the driver's torque per axle, "
         "modulated by the anti-skid device, on soap at Table 8's levels; defaults are the "
-        "E402B test of Table 3. See wsp_env/traction.py.",
+        "E402B test of Table 3. See docs/traction.md.",
     )
     p.add_argument("--vehicle", default="e402b", help="vehicle id or YAML path (e402b)")
     p.add_argument("--speed-kmh", type=_positive, default=5.0, help="initial speed (5)")
@@ -642,7 +642,7 @@ def _add_export(sub: argparse._SubParsersAction) -> None:
         help="export a trained PPO/A2C policy to ONNX, normalisation folded in",
         description="Write the deterministic actor of a trained model (normalisation folded "
         "in) as ONNX for an embedded WSP, and measure ONNX Runtime's per-decision latency. "
-        "Model files are pickles: load only files you trust. See wsp_env/export.py.",
+        "Model files are pickles: load only files you trust. See docs/training.md.",
     )
     p.add_argument("model", help="a model file written by `wsp-env train` (.zip), or a shipped "
                    "policy's name")  # fmt: skip

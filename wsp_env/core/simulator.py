@@ -191,7 +191,7 @@ class VehicleArrays:
 class TrainSim:
     """``n_envs`` braking runs of one vehicle, advanced together.
 
-    Substep ``dt_s`` (default 1 ms: see README "Integrator" for the convergence figures) and
+    Substep ``dt_s`` (default 1 ms: see docs/physics.md for the convergence figures) and
     control period ``control_period_s`` (20 ms, the BCU cycle). A wheel whose sliding speed
     exceeds ``max(slide_threshold_kmh, slide_threshold_rel V)`` counts as sliding in the metrics
     (time sliding, longest slide): a slide deeper than a WSP's working slip, which a WSP ends

@@ -17,7 +17,7 @@ Four parts, as in seed 002 Fig. 2 (one set per wheelset):
   acceleration from a robust derivative of ``omega_rm`` (a second-order state-variable
   differentiator, cut-off ``derivative_cutoff_hz``, damping 0.7: its noise gain falls as
   ``f^-2`` above the cut-off; 100 Hz passes the slide dynamics, 0.1-1 s, with ~2 ms of lag;
-  with noisy speed sensors a lower cut-off trades lag for noise, README "rig") and the torque
+  with noisy speed sensors a lower cut-off trades lag for noise, docs/rig.md) and the torque
   ``C_s^ = J_e domega_w^/dt - r T^``.
 * **Virtual railway vehicle** (§3.2): the project's physics (``TrainSim``, degraded adhesion with
   recovery and cleaning) with the wheel torques given from outside (``EP_EXT_TORQUE``): the
@@ -95,7 +95,7 @@ class RigConfig:
     omega_noise_kmh: float = field(default=0.0, metadata={"ge": 0.0})  # roller speed, as km/h
     force_noise_N: float = field(default=0.0, metadata={"ge": 0.0})
     # 100 Hz: a lag of ~2 ms (2 zeta / omega_n); at 25 Hz (9 ms) a learned policy that modulates
-    # near the adhesion peak stopped 2.4 % longer on the rig than on the track (README "rig")
+    # near the adhesion peak stopped 2.4 % longer on the rig than on the track (docs/rig.md)
     derivative_cutoff_hz: float = field(default=100.0, metadata={"gt": 0.0})
     smc_gain_Nm: float = field(default=3000.0, metadata={"ge": 0.0})  # k of Eq. 19
     smc_boundary_kmh: float = field(default=0.2, metadata={"gt": 0.0})  # phi, as wheel km/h

@@ -81,7 +81,7 @@ def _build(out: Path, result: dict[str, Any]) -> None:
         "# Physics fidelity checks (`wsp-env validate`)",
         "",
         "Each check is a premise the adhesion model must hold together with the others "
-        '(README "Physics"; `wsp_env/validate.py` says how each is judged).',
+        "(docs/physics.md; docs/validation.md says how each is judged).",
         "",
         f"## Seed 002 braking test (Tables 6-7, Table 5 fixed): {_flag(s2['passed'])}",
         "",
