@@ -7,18 +7,26 @@ or argument, and exit status 2 — never a traceback, never a half-written outpu
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 import numpy as np
 
 from wsp_env.core.config import ConfigError, from_dict, load_rail, load_vehicle
-from wsp_env.files import write_json
+from wsp_env.files import Outputs, write_json
 
 
 class UserError(Exception):
     """A mistake in the user's input; its message is printed as one line."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with its errors on one line (the usage is one ``--help`` away)."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
 def _vehicle_for_speed(vehicle_id: str, speed_kmh: float) -> Any:
@@ -52,6 +60,39 @@ def _positive(text: str) -> float:
     return v
 
 
+def _bounded(low: float, high: float, low_open: bool = False) -> Any:
+    """An argparse type: a finite number in ``[low, high]`` (``(low, high]`` if ``low_open``)."""
+
+    def parse(text: str) -> float:
+        try:
+            v = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+        above = v > low if low_open else v >= low
+        if not (np.isfinite(v) and above and v <= high):
+            span = f"{'(' if low_open else '['}{low:g}, {high:g}]"
+            raise argparse.ArgumentTypeError(f"must be in {span}, got {text!r}")
+        return v
+
+    return parse
+
+
+def _seed(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
+    if not 0 <= v < 2**63:
+        raise argparse.ArgumentTypeError(f"must be a whole number >= 0, got {text!r}")
+    return v
+
+
+def _reserve(args: argparse.Namespace, attr: str, option: str, kind: str = "file") -> Path | None:
+    """The temp path to write ``args.<attr>``'s output to, checked now (``files.Outputs``)."""
+    path = getattr(args, attr)
+    return None if path is None else args.outputs.reserve(path, option, kind)
+
+
 def _nonneg(text: str) -> float:
     try:
         v = float(text)
@@ -60,6 +101,34 @@ def _nonneg(text: str) -> float:
     if not (np.isfinite(v) and v >= 0):
         raise argparse.ArgumentTypeError(f"must be >= 0, got {text!r}")
     return v
+
+
+_LEVEL = _bounded(0.0, 1.0, low_open=True)  # an adhesion level (configs/rails.yaml's bounds)
+
+
+def _policies(names: list[str], wsp_config: str | None) -> list[Any]:
+    """The policies named on the command line, each once under a name of its own (two model
+    files that call themselves alike are told apart by their paths); ``--wsp-config`` only
+    where a classical WSP reads it."""
+    from wsp_env.policy import make_policy
+
+    if wsp_config is not None and "classical" not in names:
+        raise UserError("--wsp-config: only the classical WSP reads it (add --policy classical)")
+    if len(set(names)) < len(names):
+        raise UserError("--policy: the same policy is named twice")
+    policies = []
+    for name in names:
+        try:
+            policies.append(make_policy(name, wsp_config if name == "classical" else None))
+        except FileNotFoundError as err:
+            raise UserError(f"--policy: {err}") from None
+    seen: dict[str, int] = {}
+    for pol in policies:
+        seen[pol.name] = seen.get(pol.name, 0) + 1
+    for pol, name in zip(policies, names, strict=True):
+        if seen[pol.name] > 1:  # results are keyed by policy name: keep them apart
+            pol.name = f"{pol.name} ({name})"
+    return policies
 
 
 # ---- simulate -------------------------------------------------------------------------------
@@ -87,9 +156,11 @@ def _add_simulate(sub: argparse._SubParsersAction) -> None:
         "(agents/pretrained) or a trained model file (none); model files are pickles: "
         "load only files you trust",
     )
-    p.add_argument("--wsp-config", default=None, help="classical WSP parameters (YAML)")
-    p.add_argument("--seed", type=int, default=0, help="draws adhesion level and pattern (0)")
-    p.add_argument("--mu-contaminated", type=_positive, default=None, help="fix the level")
+    p.add_argument(
+        "--wsp-config", default=None, help="classical WSP parameters (YAML; --policy classical)"
+    )
+    p.add_argument("--seed", type=_seed, default=0, help="draws adhesion level and pattern (0)")
+    p.add_argument("--mu-contaminated", type=_LEVEL, default=None, help="fix the level (0-1]")
     p.add_argument(
         "--pattern", choices=("uniform", "step_up", "step_down", "patches"), default=None
     )
@@ -97,24 +168,35 @@ def _add_simulate(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--json", dest="json_path", default=None, help="write the result here")
     p.add_argument("--plot", default=None, help="write a PNG of speeds and pressures")
     p.add_argument("--trace", default=None, help="write a wsp-trace/1 trace STEM.csv + .json")
-    p.add_argument("--sample-period-s", type=_positive, default=0.1, help="trace logger period")
-    p.add_argument("--speed-noise-kmh", type=_nonneg, default=0.1, help="trace sensor noise")
-    p.add_argument("--pressure-noise-bar", type=_nonneg, default=0.01, help="trace sensor noise")
-    p.add_argument("--dt-s", type=_positive, default=1e-3, help="physics substep (0.001)")
+    p.add_argument(
+        "--sample-period-s", type=_bounded(1e-3, 10.0), default=0.1,
+        help="trace logger period (0.1; 0.001-10)",
+    )  # fmt: skip
+    p.add_argument(
+        "--speed-noise-kmh", type=_bounded(0.0, 50.0), default=0.1, help="trace sensor noise"
+    )
+    p.add_argument(
+        "--pressure-noise-bar", type=_bounded(0.0, 10.0), default=0.01, help="trace sensor noise"
+    )
+    p.add_argument(
+        "--dt-s", type=_bounded(1e-5, 0.02), default=1e-3,
+        help="physics substep (0.001; 1e-5 to the 0.02 s control period, dividing it)",
+    )  # fmt: skip
     p.set_defaults(func=cmd_simulate)
 
 
 def cmd_simulate(args: argparse.Namespace) -> dict[str, Any]:
     from wsp_env.evaluation.runner import run_one, trace_metadata
-    from wsp_env.evaluation.trace_writer import SensorModel, sample_run, write_trace
-    from wsp_env.policy import make_policy
+    from wsp_env.evaluation.trace_writer import SensorModel, sample_run, stem_path, write_trace
 
     vehicle = _vehicle_for_speed(args.vehicle, args.speed_kmh)
     rail = load_rail(args.rail, args.rails_config)  # a bad table or rail fails here, named
-    try:
-        policy = make_policy(args.policy, args.wsp_config)
-    except FileNotFoundError as err:
-        raise UserError(f"--policy: {err}") from None
+    (policy,) = _policies([args.policy], args.wsp_config)
+    plot_tmp = _reserve(args, "plot", "--plot")
+    trace_tmp = None
+    if args.trace:
+        args.trace = str(stem_path(args.trace))  # STEM, STEM.csv and STEM.meta.json name one
+        trace_tmp = _reserve(args, "trace", "--trace", "stem")
     case: dict[str, Any] = {"demand": args.demand, **_fixed_rail(args)}
     env_kwargs = {"substep_s": args.dt_s, "rails_config": args.rails_config}
     run, record = run_one(vehicle, args.rail, args.speed_kmh, policy, args.seed, case, env_kwargs)
@@ -129,12 +211,13 @@ def cmd_simulate(args: argparse.Namespace) -> dict[str, Any]:
         **{k: v for k, v in run.items() if k not in ("scenario", "seed", "policy", "conditions")},
     }
     outputs = []
-    if args.plot:
+    if plot_tmp is not None:
         from wsp_env.evaluation.plotting import plot_run
 
         title = f"{vehicle.name}, {args.speed_kmh:g} km/h, {args.rail}, policy {policy.name}"
-        outputs.append(plot_run(record, args.plot, title=title))
-    if args.trace:
+        plot_run(record, plot_tmp, title=title)
+        outputs.append(args.plot)
+    if trace_tmp is not None:
         sensors = SensorModel(
             sample_period_s=args.sample_period_s,
             speed_noise_kmh=args.speed_noise_kmh,
@@ -148,7 +231,8 @@ def cmd_simulate(args: argparse.Namespace) -> dict[str, Any]:
             args.sample_period_s,
             f"simulated {vehicle.id} {args.rail} {args.speed_kmh:g} km/h seed {args.seed}",
         )
-        outputs.extend(write_trace(args.trace, columns, meta))
+        write_trace(trace_tmp, columns, meta)
+        outputs.extend([f"{args.trace}.csv", f"{args.trace}.meta.json"])
     result["outputs"] = [str(p) for p in outputs]
     return result
 
@@ -199,17 +283,12 @@ def _add_evaluate(sub: argparse._SubParsersAction) -> None:
 
 
 def cmd_evaluate(args: argparse.Namespace) -> dict[str, Any]:
-    from wsp_env.evaluation import load_suite, run_suite, summarise
-    from wsp_env.policy import make_policy
+    from wsp_env.evaluation import expand, load_suite, run_suite, summarise
 
     suite = load_suite(args.suite)
-    load_vehicle(args.vehicle)  # fail early with a clear message
-    policies = []
-    for name in args.policy:
-        try:
-            policies.append(make_policy(name, args.wsp_config))
-        except FileNotFoundError as err:
-            raise UserError(f"--policy: {err}") from None
+    expand(suite, load_vehicle(args.vehicle))  # fail early: the vehicle, the suite's speeds
+    policies = _policies(args.policy, args.wsp_config)
+    report_tmp = _reserve(args, "report", "--report", "dir")
     results, records = [], {}
     for pol in policies:
         res, rec = run_suite(
@@ -226,12 +305,11 @@ def cmd_evaluate(args: argparse.Namespace) -> dict[str, Any]:
         "runs": results,
         "summary": summary,
     }
-    if args.report:
+    if report_tmp is not None:
         from wsp_env.evaluation.report import write_report
 
-        payload["report"] = str(
-            write_report(args.report, suite, args.vehicle, results, summary, records)
-        )
+        write_report(report_tmp, suite, args.vehicle, results, summary, records)
+        payload["report"] = args.report
     return payload
 
 
@@ -276,6 +354,8 @@ def cmd_calibrate(args: argparse.Namespace) -> dict[str, Any]:
     from wsp_env.calibration.discovery import discover
     from wsp_env.calibration.traces import TraceError, read_trace
 
+    export_tmp = _reserve(args, "export", "--export")
+    report_tmp = _reserve(args, "report", "--report", "dir")
     try:
         trace = read_trace(args.trace)
     except TraceError as err:
@@ -297,10 +377,12 @@ def cmd_calibrate(args: argparse.Namespace) -> dict[str, Any]:
     }
     from wsp_env.calibration.export import export_config, write_report
 
-    if args.export:
-        payload["outputs"].extend(str(p) for p in export_config(args.export, trace, result))
-    if args.report:
-        payload["outputs"].append(str(write_report(args.report, trace, result)))
+    if export_tmp is not None:
+        export_config(export_tmp, trace, result)
+        payload["outputs"].extend([args.export, f"{args.export}.options.yaml"])
+    if report_tmp is not None:
+        write_report(report_tmp, trace, result)
+        payload["outputs"].append(args.report)
     return payload
 
 
@@ -345,7 +427,7 @@ def _add_bench(sub: argparse._SubParsersAction) -> None:
         "gymnasium.make; native vector env) and of CartPole-v1 in the same run; medians.",
     )
     p.add_argument("--json", dest="json_path", default=None, help="write the result here")
-    p.add_argument("--repeats", type=int, default=5, help="timed runs per figure (5)")
+    p.add_argument("--repeats", type=int, default=5, help="timed runs per figure (5; 1-100)")
     p.add_argument("--quick", action="store_true", help="tiny counts (smoke test)")
     p.set_defaults(func=cmd_bench)
 
@@ -353,8 +435,8 @@ def _add_bench(sub: argparse._SubParsersAction) -> None:
 def cmd_bench(args: argparse.Namespace) -> dict[str, Any]:
     from wsp_env.evaluation.bench import run_bench
 
-    if args.repeats < 1:
-        raise UserError("--repeats: must be >= 1")
+    if not 1 <= args.repeats <= 100:
+        raise UserError(f"--repeats: must be 1-100, got {args.repeats}")
     return run_bench(quick=args.quick, repeats=args.repeats)
 
 
@@ -377,7 +459,7 @@ def _add_train(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--config", default=None, help="configs/train/NAME.yaml (or a built-in NAME)")
     p.add_argument("--out", default=None, help="run folder (new or empty; default: --resume's)")
-    p.add_argument("--seed", type=int, default=None, help="override the config's seed")
+    p.add_argument("--seed", type=_seed, default=None, help="override the config's seed")
     p.add_argument("--resume", default=None, help="continue the run in this folder")
     p.add_argument(
         "--total-timesteps", type=int, default=None, help="the run's total (default: config's)"
@@ -448,7 +530,11 @@ def _add_validate(sub: argparse._SubParsersAction) -> None:
 def cmd_validate(args: argparse.Namespace) -> dict[str, Any]:
     from wsp_env.validation.checks import run_validation
 
-    return run_validation(args.report)
+    report_tmp = _reserve(args, "report", "--report", "dir")
+    result = run_validation(report_tmp)
+    if report_tmp is not None:
+        result["report"] = args.report
+    return result
 
 
 def _print_validate(result: dict[str, Any]) -> None:
@@ -515,11 +601,11 @@ def _add_rig(sub: argparse._SubParsersAction) -> None:
     )  # fmt: skip
     p.add_argument("--rail", default="soap", help="a rail of configs/rails.yaml (soap)")
     p.add_argument("--speed-kmh", type=_positive, default=120.0, help="initial speed (120)")
-    p.add_argument("--mu-contaminated", type=_positive, default=None, help="fix the level")
+    p.add_argument("--mu-contaminated", type=_LEVEL, default=None, help="fix the level (0-1]")
     p.add_argument(
         "--pattern", choices=("uniform", "step_up", "step_down", "patches"), default=None
     )
-    p.add_argument("--seed", type=int, default=0, help="draws what the case leaves open (0)")
+    p.add_argument("--seed", type=_seed, default=0, help="draws what the case leaves open (0)")
     p.add_argument("--rig-config", default=None, help="rig parameters (YAML, RigConfig fields)")
     p.add_argument("--omega-noise-kmh", type=_nonneg, default=None, help="roller speed noise")
     p.add_argument("--json", dest="json_path", default=None, help="write the result here")
@@ -529,7 +615,6 @@ def _add_rig(sub: argparse._SubParsersAction) -> None:
 
 def cmd_rig(args: argparse.Namespace) -> dict[str, Any]:
     from wsp_env.core.config import read_yaml
-    from wsp_env.policy import make_policy
     from wsp_env.rig.roller_rig import RigConfig, plot_rig, rig_test
 
     vehicle = _vehicle_for_speed(args.vehicle, args.speed_kmh)
@@ -542,14 +627,12 @@ def cmd_rig(args: argparse.Namespace) -> dict[str, Any]:
         rig = from_dict(RigConfig, rig_fields, "")
     except ConfigError as err:
         raise ConfigError(f"{where}: {err}") from None
-    try:
-        policy = make_policy(args.policy)
-    except FileNotFoundError as err:
-        raise UserError(f"--policy: {err}") from None
+    (policy,) = _policies([args.policy], None)
+    plot_tmp = _reserve(args, "plot", "--plot")
     case = _fixed_rail(args)
     result = rig_test(vehicle, policy, args.rail, args.speed_kmh, args.seed, case, rig)
-    if args.plot:
-        plot_rig(result, args.plot)
+    if plot_tmp is not None:
+        plot_rig(result, str(plot_tmp))
     return result.summary
 
 
@@ -568,7 +651,10 @@ def _print_rig(result: dict[str, Any]) -> None:
     print(f"  e_C RMS [N m]       {row(result['e_C_rms_Nm'], '.0f')}")
     print(f"  mean sliding [km/h] {row(result['mean_sliding_kmh'], '.2f')} (rig), "
           f"{row(result['track_mean_sliding_kmh'], '.2f')} (track)")  # fmt: skip
-    print(f"  {result['wall_time_s']:.1f} s wall, {result['real_time_factor']:.0f}x real time")
+    print(
+        f"  {result['rig_stopping_time_s']:.1f} s of braking in {result['wall_time_s']:.1f} s "
+        f"wall ({result['real_time_factor']:.2g}x real time, compilation included)"
+    )
 
 
 # ---- traction -------------------------------------------------------------------------------
@@ -584,10 +670,16 @@ def _add_traction(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--vehicle", default="e402b", help="vehicle id or YAML path (e402b)")
     p.add_argument("--speed-kmh", type=_positive, default=5.0, help="initial speed (5)")
-    p.add_argument("--torque-nm", type=_positive, default=12300.0, help="per axle (12300)")
-    p.add_argument("--duration-s", type=_positive, default=20.0, help="test duration (20)")
     p.add_argument(
-        "--mu-contaminated", type=_positive, default=None,
+        "--torque-nm", type=_bounded(0.0, 1e6, low_open=True), default=12300.0,
+        help="per axle (12300)",
+    )  # fmt: skip
+    p.add_argument(
+        "--duration-s", type=_bounded(0.0, 3600.0, low_open=True), default=20.0,
+        help="test duration (20; at most 3600)",
+    )  # fmt: skip
+    p.add_argument(
+        "--mu-contaminated", type=_LEVEL, default=None,
         help="soap level under axle 1 (default 0.0846: Table 8's 0.09 x R_1, traction.py)",
     )  # fmt: skip
     p.add_argument(
@@ -605,7 +697,8 @@ def cmd_traction(args: argparse.Namespace) -> dict[str, Any]:
     from wsp_env.core.config import read_yaml
     from wsp_env.rig.traction import MU_HEAD, plot_traction, run_traction
 
-    vehicle = load_vehicle(args.vehicle)
+    vehicle = _vehicle_for_speed(args.vehicle, args.speed_kmh)
+    plot_tmp = _reserve(args, "plot", "--plot")
     antiskid = None
     if args.antiskid_config:
         try:
@@ -618,8 +711,8 @@ def cmd_traction(args: argparse.Namespace) -> dict[str, Any]:
         mu_contaminated=args.mu_contaminated or MU_HEAD, antiskid=antiskid,
         no_antiskid=args.no_antiskid,
     )  # fmt: skip
-    if args.plot:
-        plot_traction(run, args.plot)
+    if plot_tmp is not None:
+        plot_traction(run, str(plot_tmp))
     return run.summary
 
 
@@ -654,7 +747,12 @@ def _add_export(sub: argparse._SubParsersAction) -> None:
 def cmd_export(args: argparse.Namespace) -> dict[str, Any]:
     from wsp_env.training.export import export_onnx
 
-    return export_onnx(args.model, args.onnx)
+    if not args.onnx.endswith(".onnx"):
+        raise UserError(f"--onnx: {args.onnx} should end in .onnx")
+    onnx_tmp = _reserve(args, "onnx", "--onnx")
+    result = export_onnx(args.model, onnx_tmp)
+    result["onnx"] = args.onnx
+    return result
 
 
 def _print_export(result: dict[str, Any]) -> None:
@@ -667,7 +765,7 @@ def _print_export(result: dict[str, Any]) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="wsp-env", description="Wheel slide protection braking: simulate, evaluate, train."
     )
     sub = parser.add_subparsers(dest="command", required=True)
@@ -700,13 +798,22 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        result = args.func(args)
-        if getattr(args, "json_path", None):
-            write_json(args.json_path, result)
+        with Outputs() as outputs:  # every output checked first, all written at the end or none
+            args.outputs = outputs
+            json_tmp = _reserve(args, "json_path", "--json") if "json_path" in args else None
+            result = args.func(args)
+            if json_tmp is not None:
+                write_json(json_tmp, result)
+            outputs.commit()
     except (ConfigError, UserError, ValueError, OSError) as err:
         print(f"wsp-env {args.command}: error: {err}", file=sys.stderr)
         return 2
-    PRINTERS[args.command](result)
+    try:
+        PRINTERS[args.command](result)
+        sys.stdout.flush()
+    except BrokenPipeError:  # `wsp-env simulate | head -1`: the reader has had enough
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141  # as a process that SIGPIPE ended (128 + 13); the outputs are written
     if args.command == "validate" and not result["passed"]:
         return 1  # a fidelity check failed (the result and report are written)
     return 0

@@ -116,6 +116,7 @@ def replace_dir_atomically(target: str | Path, build: Callable[[Path], None]) ->
     tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent))
     try:
         build(tmp)
+        os.chmod(tmp, 0o777 & ~_UMASK)  # mkdtemp makes 0700; a report gets the usual mode
         if target.exists():
             shutil.rmtree(target)
         os.replace(tmp, target)
@@ -131,3 +132,140 @@ def write_json(path: str | Path, payload: dict[str, Any]) -> Path:
     target.parent.mkdir(parents=True, exist_ok=True)
     text = json.dumps(finite(payload), indent=2, allow_nan=False, default=json_default) + "\n"
     return write_atomically(target, lambda fh: fh.write(text))
+
+
+# ---- a command's outputs: checked before the work, written together at the end -------------
+
+_TEMP_PREFIX = ".wsp-"
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def _remove(path: Path) -> None:
+    with contextlib.suppress(OSError):
+        if path.is_dir() and not path.is_symlink():
+            shutil.rmtree(path)
+        else:
+            path.unlink()
+
+
+def remove_stale_temps(folder: Path, name: str) -> None:
+    """Remove what an earlier, killed command left of its outputs for ``name`` in ``folder``
+    (its temp names carry its process id; a living process's are left alone)."""
+    if not folder.is_dir():
+        return
+    for p in folder.glob(f"{_TEMP_PREFIX}*.{name}*"):
+        pid = p.name[len(_TEMP_PREFIX) :].split("-", 1)[0]
+        if pid.isdigit() and int(pid) != os.getpid() and not _alive(int(pid)):
+            _remove(p)
+
+
+class OutputError(ValueError):
+    """An output path that cannot be written (one line naming the option and the path)."""
+
+
+class Outputs:
+    """A command's output files and folders: each path is checked when reserved, before any
+    work; producers write to the temp sibling :meth:`reserve` returns (same folder, so the
+    final move is an atomic rename); :meth:`commit` moves them all into place at the end, and
+    on failure :meth:`abort` removes them, with any folder created for them: all of a
+    command's outputs or none. A producer may write further files named after the temp path
+    (``TEMP.csv`` and ``TEMP.meta.json`` for a trace stem ``TEMP``): they move with it.
+    Use as a context manager: leaving it by an exception aborts.
+    """
+
+    def __init__(self) -> None:
+        self._items: list[tuple[Path, Path, str]] = []  # (final, temp, kind)
+        self._created: list[Path] = []
+        self._token = f"{os.getpid()}-{os.urandom(3).hex()}"
+
+    def __enter__(self) -> Outputs:
+        return self
+
+    def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> None:
+        if exc_type is not None:
+            self.abort()
+
+    def reserve(self, path: str | Path, option: str, kind: str = "file") -> Path:
+        """Check that ``path`` (given by ``option``) can be written as a ``kind`` (``file``,
+        ``stem``: files named by suffixing it, or ``dir``: a report folder); return the temp
+        path to write instead."""
+        final = Path(path)
+        if not str(path) or final.name in ("", ".", ".."):
+            raise OutputError(f"{option}: {str(path)!r} is not a file name")
+        resolved = final.resolve()
+        for other, _, _ in self._items:
+            if other.resolve() == resolved:
+                raise OutputError(f"{option}: {final} is also another output of this command")
+        if kind == "dir":
+            if final.exists() and not final.is_dir():
+                raise OutputError(f"{option}: {final} exists and is not a folder")
+            if final.is_dir() and any(final.iterdir()) and not (final / "report.md").exists():
+                raise OutputError(
+                    f"{option}: {final} exists and is not a wsp-env report folder; not overwriting"
+                )
+        elif final.is_dir():
+            raise OutputError(f"{option}: {final} is a folder")
+        self._make_parent(final.parent, option)
+        remove_stale_temps(final.parent, final.name)
+        temp = final.with_name(f"{_TEMP_PREFIX}{self._token}.{final.name}")
+        self._items.append((final, temp, kind))
+        return temp
+
+    def _make_parent(self, folder: Path, option: str) -> None:
+        missing = []
+        probe = folder
+        while not probe.exists():
+            missing.append(probe)
+            if probe.parent == probe:
+                break
+            probe = probe.parent
+        if not probe.is_dir():
+            raise OutputError(f"{option}: {probe} is not a folder")
+        if not os.access(probe, os.W_OK | os.X_OK):
+            raise OutputError(f"{option}: cannot write in {probe} (permission denied)")
+        for p in reversed(missing):
+            try:
+                p.mkdir()
+            except OSError as err:
+                raise OutputError(f"{option}: cannot create {p} ({err.strerror})") from None
+            self._created.append(p)
+
+    def _written(self, temp: Path) -> list[Path]:
+        """Everything a producer wrote for ``temp``: the path itself and ``temp + suffix``."""
+        return sorted(temp.parent.glob(f"{temp.name}*"))
+
+    def commit(self) -> list[Path]:
+        """Move every written output into place; return the final paths."""
+        done: list[Path] = []
+        for final, temp, kind in self._items:
+            for written in self._written(temp):
+                target = final.with_name(final.name + written.name[len(temp.name) :])
+                if kind == "dir" and target.is_dir():
+                    shutil.rmtree(target)
+                os.replace(written, target)
+                done.append(target)
+        self._items.clear()
+        self._created.clear()
+        return done
+
+    def abort(self) -> None:
+        """Remove every temp output and every folder created for them."""
+        for _, temp, _ in self._items:
+            for written in self._written(temp):
+                _remove(written)
+            for stray in temp.parent.glob(f".{temp.name}.*"):  # a report folder's own temp
+                _remove(stray)
+        for folder in reversed(self._created):
+            with contextlib.suppress(OSError):
+                folder.rmdir()  # only if empty
+        self._items.clear()
+        self._created.clear()

@@ -172,7 +172,7 @@ def sample_run(
 # --------------------------------------------------------------------------------------------
 
 
-def _stem_path(stem: str | Path) -> Path:
+def stem_path(stem: str | Path) -> Path:
     """``STEM`` from ``STEM``, ``STEM.csv`` or ``STEM.meta.json``."""
     path = Path(stem)
     for suffix in (".meta.json", ".csv"):
@@ -289,7 +289,7 @@ def write_trace(stem: str | Path, columns: dict[str, np.ndarray], meta: dict) ->
     Both files go through temp files and ``os.replace``; on any failure neither is left behind.
     ``stem`` may also be given as ``STEM.csv``; missing parent directories are created.
     """
-    stem = _stem_path(stem)
+    stem = stem_path(stem)
     meta = {"format": FORMAT, **meta}  # "format" first in the file; a given value is kept
     n_axles = _validate_meta(meta)
     arrays = _validate_columns(columns, n_axles)
