@@ -14,34 +14,45 @@ import contextlib
 import hashlib
 from pathlib import Path
 
-PACKAGE = Path(__file__).resolve().parent
-KERNEL_SOURCES = (
+PACKAGE = Path(__file__).resolve().parents[1]  # wsp_env/
+KERNEL_SOURCES = (  # every file with compiled kernels, relative to the package
     "physics/layout.py",
     "physics/adhesion.py",
     "physics/brake.py",
     "physics/rail.py",
     "physics/integrator.py",
-    "env_kernel.py",
-    "reference.py",
+    "core/kernel.py",
+    "evaluation/reference.py",
+    "rig/roller_rig.py",
     "baselines/oracle.py",  # installed as wsp_env.baselines; ../baselines in a checkout
 )
 STAMP_NAME = "wsp_env_kernels.sha256"
 
 
-def _digest() -> str:
-    h = hashlib.sha256()
+def kernel_files() -> list[Path]:
+    """The kernel source files as this install lays them out (a checkout keeps ``baselines/``
+    beside the package); a missing one is an error: it would escape the hash."""
+    found = []
     for rel in KERNEL_SOURCES:
+        path = next((p for p in (PACKAGE / rel, PACKAGE.parent / rel) if p.exists()), None)
+        if path is None:
+            raise FileNotFoundError(f"jit_cache: kernel source {rel} not found under {PACKAGE}")
+        found.append(path)
+    return found
+
+
+def digest() -> str:
+    """One hash over every kernel source file (its path and bytes)."""
+    h = hashlib.sha256()
+    for rel, path in zip(KERNEL_SOURCES, kernel_files(), strict=True):
         h.update(rel.encode())
-        for path in (PACKAGE / rel, PACKAGE.parent / rel):
-            if path.exists():
-                h.update(path.read_bytes())
-                break
+        h.update(path.read_bytes())
     return h.hexdigest()
 
 
 def refresh() -> None:
     """Drop cached kernels compiled from other versions of the kernel sources."""
-    digest = _digest()
+    digest = digest()
     stamp = PACKAGE / "__pycache__" / STAMP_NAME
     with contextlib.suppress(OSError):
         if stamp.exists() and stamp.read_text() == digest:
