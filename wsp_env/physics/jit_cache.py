@@ -52,10 +52,10 @@ def digest() -> str:
 
 def refresh() -> None:
     """Drop cached kernels compiled from other versions of the kernel sources."""
-    digest = digest()
+    current = digest()
     stamp = PACKAGE / "__pycache__" / STAMP_NAME
     with contextlib.suppress(OSError):
-        if stamp.exists() and stamp.read_text() == digest:
+        if stamp.exists() and stamp.read_text() == current:
             return
     roots = [PACKAGE, PACKAGE.parent / "baselines"]
     for root in roots:
@@ -64,4 +64,4 @@ def refresh() -> None:
                 cached.unlink()
     with contextlib.suppress(OSError):
         stamp.parent.mkdir(exist_ok=True)
-        stamp.write_text(digest)
+        stamp.write_text(current)
