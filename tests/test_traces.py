@@ -329,3 +329,26 @@ def test_a_constant_or_held_speed_is_no_averaged_update(trace_dir):
     assert trace.v_train_update_s == pytest.approx(1.0, rel=0.1)
     assert trace.v_train_logger_lag_s == 0.0
     assert not any("updates every" in n for n in trace.notes)
+
+
+def test_a_record_larger_than_a_braking_test_is_refused(trace_dir, tmp_path, monkeypatch):
+    """Rows, duration and ground-speed steps are bounded (a 10^6-row file took 466 s and
+    3.1 GB before): one line each, before any fitting."""
+    import wsp_env.calibration.traces as traces
+
+    header, rows, meta = _load(trace_dir)
+    monkeypatch.setattr(traces, "MAX_ROWS", len(rows) - 1)
+    with pytest.raises(TraceError, match=f"more than {len(rows) - 1:,} data rows"):
+        read_trace(_write(tmp_path, "long", header, rows, meta))
+    monkeypatch.undo()
+
+    t = header.index("time_s")
+    slow = [[*r[:t], f"{float(r[t]) * 60:.3f}", *r[t + 1 :]] for r in rows]  # minutes for seconds
+    with pytest.raises(TraceError, match=r"column 'time_s': spans .* s, more than one braking"):
+        read_trace(_write(tmp_path, "slow", header, slow, meta))
+
+    v = header.index("v_train_kmh")
+    jumpy = [list(r) for r in rows]
+    jumpy[10][v] = f"{float(jumpy[10][v]) + 40:.3f}"  # 40 km/h up and down within 0.2 s
+    with pytest.raises(TraceError, match=r"column 'v_train_kmh': jumps .* \(line 11\)"):
+        read_trace(_write(tmp_path, "jumpy", header, jumpy, meta))

@@ -392,8 +392,10 @@ def _print_calibrate(result: dict[str, Any]) -> None:
         print(f"  read: {note}")
     for key, before in result["errors_before"].items():
         print(f"  {key:26s} {before:8.3f} -> {result['errors_after'][key]:8.3f}")
-    if not result["added_effects"]:
+    if not result["added_effects"] and not result["unexplained"]:
         print("  nothing to add: the model explains the data")
+    elif not result["added_effects"]:
+        print("  nothing in the effect library explains the data (below)")
     for e in result["added_effects"]:
         params = ", ".join(f"{k} {v:.4g}" for k, v in e["parameters"].items())
         change = f"{e['before']:.3f} -> {e['after']:.3f}"

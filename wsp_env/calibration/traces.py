@@ -8,7 +8,9 @@ what is wrong. Input files are only read, never modified.
 Checks: metadata present, valid JSON, ``format`` and required fields; axle count of the metadata
 against the columns; required columns present, numeric and not mostly empty; time strictly
 increasing; gaps of more than ``MAX_GAP`` samples in a required column; physically implausible
-values for the stated unit (a speed column in m/s or a pressure column in kPa, negative speeds).
+values for the stated unit (a speed column in m/s or a pressure column in kPa, negative speeds);
+what one braking test can be (``MAX_ROWS`` rows, ``MAX_DURATION_S``, no ground-speed step of
+``MAX_STEP_KMH`` faster than ``MAX_STEP_MPS2``).
 Gaps of up to ``MAX_GAP`` samples are interpolated linearly in time and listed in
 ``Trace.notes``.
 """
@@ -32,6 +34,15 @@ from wsp_env.core.records import CONTAMINANTS, FORMAT
 MAX_GAP = 3  # samples: longer runs of missing values in a required column are an error
 MAX_SPEED_KMH = 500.0
 MAX_PRESSURE_BAR = 12.0
+# What a braking trace can be: a stop from 350 km/h at 0.3 m/s^2 takes ~330 s, so 30 minutes
+# leaves room for coasting lead-ins; 100,000 rows hold 1,000 s at 100 Hz (loggers log at 10-100
+# Hz). A larger file is another kind of record (a whole journey): cut or resample it first.
+MAX_ROWS = 100_000
+MAX_DURATION_S = 1800.0
+# A ground-speed step no train makes between two samples: 20 km/h at more than 3 g (sensor
+# noise at 1 kHz reaches ~30 m/s^2 on its own, but never 20 km/h in one sample)
+MAX_STEP_KMH = 20.0
+MAX_STEP_MPS2 = 30.0
 
 
 class TraceError(ValueError):
@@ -200,7 +211,14 @@ def _read_meta(csv_path: Path) -> tuple[Path, dict[str, Any]]:
 def _read_csv(path: Path) -> tuple[list[str], list[list[str]]]:
     try:
         with path.open(newline="") as fh:
-            rows = list(csv.reader(fh))
+            rows = []
+            for row in csv.reader(fh):
+                rows.append(row)
+                if len(rows) > MAX_ROWS + 1:
+                    raise _fail(
+                        path, f"more than {MAX_ROWS:,} data rows: not one braking test (cut or "
+                        "resample it)"
+                    )  # fmt: skip
     except FileNotFoundError:
         raise _fail(path, "no such file") from None
     except (OSError, UnicodeDecodeError) as err:
@@ -296,6 +314,19 @@ def _fill_gaps(
     return filled
 
 
+def _check_jumps(path: Path, v_kmh: np.ndarray, t: np.ndarray) -> None:
+    """A ground speed that steps by more than a train can between two samples."""
+    dv = np.abs(np.diff(v_kmh))
+    rate = dv / 3.6 / np.diff(t)
+    bad = np.flatnonzero((dv > MAX_STEP_KMH) & (rate > MAX_STEP_MPS2))
+    if bad.size:
+        i = int(bad[0])
+        raise _fail(
+            path, f"column 'v_train_kmh': jumps {v_kmh[i]:g} -> {v_kmh[i + 1]:g} km/h between "
+            f"t = {t[i]:g} and {t[i + 1]:g} s (line {i + 2}): no train does that"
+        )  # fmt: skip
+
+
 def read_trace(csv_path: str | Path) -> Trace:
     """Read and validate ``NAME.csv`` + ``NAME.meta.json`` (see the module docstring)."""
     path = Path(csv_path)
@@ -329,6 +360,11 @@ def read_trace(csv_path: str | Path) -> Trace:
             f"column 'time_s': not strictly increasing at line {int(bad[0]) + 3} "
             f"({t[bad[0]]:g} -> {t[bad[0] + 1]:g})",
         )
+    if t[-1] - t[0] > MAX_DURATION_S:
+        raise _fail(
+            path, f"column 'time_s': spans {t[-1] - t[0]:.0f} s, more than one braking test "
+            f"({MAX_DURATION_S:.0f} s at most; cut it)"
+        )  # fmt: skip
     gap_filled = np.isnan(cols["v_train_kmh"])  # filled samples are no GPS update (unhold)
     for name in required[1:]:
         cols[name] = _fill_gaps(path, name, cols[name], t, notes)
@@ -340,6 +376,7 @@ def read_trace(csv_path: str | Path) -> Trace:
             else:
                 cols[name] = _fill_gaps(path, name, cols[name], t, notes)
     _check_units(path, meta, cols, n)
+    _check_jumps(path, cols["v_train_kmh"], t)
     cols["v_train_kmh"], v_noise, v_update = unhold(cols["v_train_kmh"], t, notes, gap_filled)
     v_logger_lag, v_update_noise = 0.0, v_noise
     if v_update is None:  # nothing held: perhaps updates averaged over the log period
