@@ -54,8 +54,46 @@ def _local_modules(root: Path) -> set[str]:
     return names
 
 
+def _module_of(root: Path, path: Path) -> str:
+    """The dotted module a file is, as installed (``baselines/x.py`` is ``wsp_env.baselines.x``)."""
+    parts = list(path.relative_to(root).with_suffix("").parts)
+    if parts[0] in ("baselines", "agents"):
+        parts.insert(0, "wsp_env")
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(parts)
+
+
+def _absolute(root: Path, path: Path, node: ast.ImportFrom) -> str:
+    """``node``'s module, a relative import resolved against the importing file."""
+    if not node.level:
+        return node.module or ""
+    package = _module_of(root, path).split(".")
+    if path.name != "__init__.py":
+        package.pop()
+    base = package[: len(package) - (node.level - 1)]
+    return ".".join([*base, node.module] if node.module else base)
+
+
+def _root_name(node: ast.expr) -> str | None:
+    """The name an attribute chain starts from (``a`` of ``a.b.c``)."""
+    while isinstance(node, ast.Attribute):
+        node = node.value
+    return node.id if isinstance(node, ast.Name) else None
+
+
+NAMEDTUPLE_API = ("_fields", "_replace", "_asdict", "_make", "_field_defaults")
+
+
+def _private(name: str) -> bool:
+    """A leading underscore, except dunders and namedtuple's public API (``_fields``, ...)."""
+    return name.startswith("_") and not name.startswith("__") and name not in NAMEDTUPLE_API
+
+
 def private_imports(root: Path) -> list[str]:
-    """``file:line: what`` for every private name imported or read across modules."""
+    """``file:line: what`` for every private name imported or read across modules: ``from M
+    import _x`` (relative imports too), and ``M._x`` / ``M.sub._x`` / ``getattr(M, "_x")`` where
+    ``M`` is a module of the package, a script or a test module."""
     local = _local_modules(root)
 
     def ours(module: str) -> bool:
@@ -66,26 +104,35 @@ def private_imports(root: Path) -> list[str]:
         for path in sorted((root / sub).rglob("*.py")):
             rel = path.relative_to(root)
             tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(rel))
-            aliases: dict[str, str] = {}
+            modules: set[str] = set()  # local names bound to modules (or names) of ours
             for node in ast.walk(tree):
-                if isinstance(node, ast.ImportFrom) and node.module and ours(node.module):
+                if isinstance(node, ast.ImportFrom):
+                    module = _absolute(root, path, node)
+                    if not ours(module):
+                        continue
                     for a in node.names:
-                        if a.name.startswith("_") and not a.name.startswith("__"):
-                            found.append(f"{rel}:{node.lineno}: from {node.module} import {a.name}")
-                        aliases[a.asname or a.name] = f"{node.module}.{a.name}"
+                        if _private(a.name):
+                            found.append(f"{rel}:{node.lineno}: from {module} import {a.name}")
+                        modules.add(a.asname or a.name)
                 elif isinstance(node, ast.Import):
                     for a in node.names:
                         if ours(a.name):
-                            aliases[a.asname or a.name.split(".")[0]] = a.name
+                            modules.add(a.asname or a.name.split(".")[0])
             for node in ast.walk(tree):
-                if (
-                    isinstance(node, ast.Attribute)
-                    and node.attr.startswith("_")
-                    and not node.attr.startswith("__")
-                    and isinstance(node.value, ast.Name)
-                    and node.value.id in aliases
+                if isinstance(node, ast.Attribute) and _private(node.attr):
+                    if _root_name(node.value) in modules:
+                        found.append(f"{rel}:{node.lineno}: {ast.unparse(node)}")
+                elif (
+                    isinstance(node, ast.Call)
+                    and isinstance(node.func, ast.Name)
+                    and node.func.id == "getattr"
+                    and len(node.args) >= 2
+                    and isinstance(node.args[1], ast.Constant)
+                    and isinstance(node.args[1].value, str)
+                    and _private(node.args[1].value)
+                    and _root_name(node.args[0]) in modules
                 ):
-                    found.append(f"{rel}:{node.lineno}: {node.value.id}.{node.attr}")
+                    found.append(f"{rel}:{node.lineno}: {ast.unparse(node)}")
     return found
 
 

@@ -187,3 +187,16 @@ def test_simulate_runs_the_wsp_policies_on_the_evaluation_path(tmp_path):
         "uic_z1", "soap", 100.0, make_policy("classical"), 2, {"mu_contaminated": 0.07}
     )
     assert run["stopping_distance_m"] == results["classical"]["stopping_distance_m"]
+
+
+def test_a_first_run_says_it_is_compiling(tmp_path, monkeypatch, capsys):
+    """While numba compiles (tens of seconds on a first run) the command says so, on stderr;
+    a warm run says nothing of it."""
+    import wsp_env.cli as cli
+
+    monkeypatch.setattr(cli, "compiled", lambda: False)
+    assert cli.main(["simulate", "--speed-kmh", "30"]) == 0
+    assert capsys.readouterr().err.splitlines() == [cli.COMPILE_NOTICE]
+    monkeypatch.setattr(cli, "compiled", lambda: True)
+    assert cli.main(["simulate", "--speed-kmh", "30"]) == 0
+    assert "compiling" not in capsys.readouterr().err

@@ -14,8 +14,9 @@ from typing import Any, NoReturn
 
 import numpy as np
 
-from wsp_env.core.config import ConfigError, from_dict, load_rail, load_vehicle
+from wsp_env.core.config import ConfigError, check_option, from_dict, load_rail, load_vehicle
 from wsp_env.files import Outputs, write_json
+from wsp_env.physics.jit_cache import compiled
 
 
 class UserError(Exception):
@@ -32,11 +33,7 @@ class _Parser(argparse.ArgumentParser):
 def _vehicle_for_speed(vehicle_id: str, speed_kmh: float) -> Any:
     """The vehicle, refusing an initial speed above its maximum (one line)."""
     vehicle = load_vehicle(vehicle_id)
-    if speed_kmh > vehicle.max_speed_kmh:
-        raise UserError(
-            f"--speed-kmh: {speed_kmh:g} exceeds {vehicle.id}'s maximum "
-            f"{vehicle.max_speed_kmh:g} km/h"
-        )
+    check_option("speed_kmh", speed_kmh, vehicle, where="--speed-kmh")
     return vehicle
 
 
@@ -103,7 +100,20 @@ def _nonneg(text: str) -> float:
     return v
 
 
-_LEVEL = _bounded(0.0, 1.0, low_open=True)  # an adhesion level (configs/rails.yaml's bounds)
+def _option(name: str) -> Any:
+    """An argparse type checking an environment option against the environment's own bounds
+    (``core.config.OPTION_SPECS``: one table for options, configs and the command line)."""
+
+    def parse(text: str) -> Any:
+        try:
+            return check_option(name, text, where="")
+        except ConfigError as err:
+            raise argparse.ArgumentTypeError(str(err).removeprefix(": ")) from None
+
+    return parse
+
+
+_LEVEL = _option("mu_contaminated")
 
 
 def _policies(names: list[str], wsp_config: str | None) -> list[Any]:
@@ -160,7 +170,7 @@ def _add_simulate(sub: argparse._SubParsersAction) -> None:
         "--wsp-config", default=None, help="classical WSP parameters (YAML; --policy classical)"
     )
     p.add_argument("--seed", type=_seed, default=0, help="draws adhesion level and pattern (0)")
-    p.add_argument("--mu-contaminated", type=_LEVEL, default=None, help="fix the level (0-1]")
+    p.add_argument("--mu-contaminated", type=_LEVEL, default=None, help="fix the level (0.001-1)")
     p.add_argument(
         "--pattern", choices=("uniform", "step_up", "step_down", "patches"), default=None
     )
@@ -603,7 +613,7 @@ def _add_rig(sub: argparse._SubParsersAction) -> None:
     )  # fmt: skip
     p.add_argument("--rail", default="soap", help="a rail of configs/rails.yaml (soap)")
     p.add_argument("--speed-kmh", type=_positive, default=120.0, help="initial speed (120)")
-    p.add_argument("--mu-contaminated", type=_LEVEL, default=None, help="fix the level (0-1]")
+    p.add_argument("--mu-contaminated", type=_LEVEL, default=None, help="fix the level (0.001-1)")
     p.add_argument(
         "--pattern", choices=("uniform", "step_up", "step_down", "patches"), default=None
     )
@@ -796,9 +806,20 @@ PRINTERS = {
 }
 
 
+# the commands that step the physics, and what a first run of one says while numba compiles
+# (measured: docs/physics.md, "First run")
+COMPILING = ("simulate", "evaluate", "train", "validate", "rig", "traction", "bench")
+COMPILE_NOTICE = (
+    "wsp-env: compiling the physics kernels (once per install and version; about half a "
+    "minute on 2 cores) ..."
+)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    if args.command in COMPILING and not compiled():
+        print(COMPILE_NOTICE, file=sys.stderr, flush=True)
     try:
         with Outputs() as outputs:  # every output checked first, all written at the end or none
             args.outputs = outputs

@@ -1,9 +1,9 @@
 """Synthetic braking traces from the simulator, logged like a real test (``wsp-trace/1``).
 
 ``simulate_trace`` runs one stop with a policy in the loop (the classical WSP by default),
-samples it like a logger (``trace_io.SensorModel``) and writes only *nominal* vehicle data in
-the metadata — whatever the simulation did differently (a rail condition, a gradient, a changed
-vehicle) stays undeclared, as in measured data.
+samples it like a logger (``evaluation.trace_writer.SensorModel``) and writes only *nominal*
+vehicle data in the metadata — whatever the simulation did differently (a rail condition, a
+gradient, a changed vehicle) stays undeclared, as in measured data.
 """
 
 from __future__ import annotations

@@ -8,7 +8,8 @@ physics, the WSP's reference speed, the observation, reward terms and flags), st
 by one compiled call (``core.kernel``). It offers what its users need: ``reset_env`` with
 options (and a seed), ``step``, ``ended`` and ``freeze`` for finished runs, a :class:`Recorder`
 for a run's rows, ``observe_external`` / ``act_external`` for a vehicle outside the kernel (the
-rig), and ``state_dict`` for checkpoints. Nothing outside it indexes its arrays by column.
+rig), and ``state_dict`` for checkpoints. Nothing outside it reads the WSP state, the
+observation or the reward by column (the rig, a second physical model, sets external torques).
 
 The Gymnasium classes over it are in ``wsp_env.envs``; the observation, action and reward it
 implements are documented there (``WSPBrakingEnv``'s docstring).
@@ -26,9 +27,13 @@ from gymnasium.utils import seeding
 
 from wsp_env.core import kernel as K
 from wsp_env.core.config import (
+    OPTION_SPECS,
     ConfigError,
     RailConfig,
     VehicleConfig,
+    check_number,
+    check_option,
+    check_options,
     from_dict,
     load_rails,
     load_vehicle,
@@ -100,11 +105,8 @@ class ScenarioConfig:
 
 ACTION_MODES = ("continuous", "discrete", "residual")
 
-OPTION_KEYS = (
-    "speed_kmh", "rail", "mu_contaminated", "pattern", "load_factor", "pad_factor",
-    "gradient_permille", "demand", "sections", "axle_mu_factor", "recovery_basis",
-    "background", "extra_brake_force_N",
-)  # fmt: skip
+# what ``reset(options=...)`` may fix: the names of ``config.OPTION_SPECS`` (their bounds)
+OPTION_KEYS = tuple(OPTION_SPECS)
 
 
 def _config(cls: type, value: Any, name: str) -> Any:
@@ -139,6 +141,17 @@ class BrakingCore:
         max_time_s: float = 300.0,
         residual_base: Any = None,
     ) -> None:
+        if isinstance(n_envs, bool) or not isinstance(n_envs, int | np.integer) or n_envs < 1:
+            raise ValueError(f"n_envs: must be a positive integer, got {n_envs!r}")
+        substep_s = check_number(substep_s, "substep_s", gt=0.0)
+        control_period_s = check_number(control_period_s, "control_period_s", gt=0.0)
+        n_sub = round(control_period_s / substep_s)  # TrainSim's rule, named here
+        if n_sub < 1 or abs(n_sub * substep_s - control_period_s) > 1e-9:
+            raise ValueError(
+                f"control_period_s: must be a whole multiple of substep_s ({substep_s:g} s), "
+                f"got {control_period_s:g} s"
+            )
+        max_time_s = check_number(max_time_s, "max_time_s", gt=0.0)
         veh = vehicle if isinstance(vehicle, VehicleConfig) else load_vehicle(vehicle)
         if valve_group is not None:
             if valve_group not in ("axle", "bogie"):
@@ -163,6 +176,9 @@ class BrakingCore:
                 raise ConfigError(
                     f"scenario.rails.{name}: unknown rail (known: {', '.join(self.rails)})"
                 )
+        for name in ("speed_kmh", "load_factor", "pad_factor", "gradient_permille"):
+            for i, end in enumerate(getattr(self.scenario, name) or ()):  # options' bounds
+                check_option(name, end, veh, f"scenario.{name}[{i}]")
         self.sim = TrainSim(veh, n_envs=n_envs, dt_s=substep_s, control_period_s=control_period_s)
         self.n_envs = n_envs
         self.n_axles = self.sim.n_axles
@@ -200,6 +216,10 @@ class BrakingCore:
         self.rngs: list[np.random.Generator] = [np.random.default_rng() for _ in range(n_envs)]
         self.episode_return = np.zeros(n_envs)
         self.episode_terms = np.zeros((n_envs, K.N_TERMS))
+        # stepping before every env's first reset is an error (its arrays are not a stop):
+        # one flag read per step once all are started (``_check_started``)
+        self._started = np.zeros(n_envs, dtype=bool)
+        self._all_started = False
         self._step_fn = K.env_step_parallel if n_envs >= PARALLEL_MIN_ENVS else K.env_step_serial
         # residual mode: the classical WSP runs beside the kernel; its requests for the coming
         # period are computed once per period, when the observation is first read after a step
@@ -214,7 +234,6 @@ class BrakingCore:
                     "classical WSP)"
                 )
             self.base = residual_base
-            self.base.bind(self)
             self.base_action = np.ones((n_envs, self.n_valves), dtype=np.float32)
             self._obs_full = np.zeros((n_envs, self.obs_dim), dtype=np.float32)
             self._base_stale = True
@@ -233,6 +252,8 @@ class BrakingCore:
         self._step_args = K.step_args(
             sim.n_sub, sim.dt_s, sim.control_period_s, self.params, self.state
         )
+        if self.base is not None:
+            self.base.bind(self)  # last: a base may read anything of the core
 
     # ---- observation ------------------------------------------------------------------------
 
@@ -276,10 +297,14 @@ class BrakingCore:
     # ---- scenario draws --------------------------------------------------------------------
 
     def draw_setup(self, rng: np.random.Generator, options: dict[str, Any] | None) -> RunSetup:
-        opts = dict(options or {})
-        unknown = sorted(set(opts) - set(OPTION_KEYS))
-        if unknown:
-            raise ValueError(f"options.{unknown[0]}: unknown (allowed: {', '.join(OPTION_KEYS)})")
+        """A stop's conditions: ``options`` (checked against ``config.OPTION_SPECS`` and this
+        core's vehicle and rails; a problem is a one-line ``ConfigError`` naming the option)
+        fix what they name, ``rng`` draws the rest from the scenario and the rail."""
+        opts = check_options(options, self.vehicle)
+        if "rail" in opts and opts["rail"] not in self.rails:
+            raise ConfigError(
+                f"options.rail: unknown rail {opts['rail']!r} (known: {', '.join(self.rails)})"
+            )
         sc = self.scenario
         names = list(sc.rails)
         weights = np.array([sc.rails[n] for n in names], dtype=float)
@@ -290,19 +315,13 @@ class BrakingCore:
         pad = float(rng.uniform(*sc.pad_factor))
         grade = float(rng.uniform(*sc.gradient_permille))
         emergency = bool(rng.uniform() < sc.emergency_probability)
-        rail_name = str(opts.pop("rail", rail_name))
-        if rail_name not in self.rails:
-            raise ValueError(
-                f"options.rail: unknown rail {rail_name!r} (known: {', '.join(self.rails)})"
-            )
+        rail_name = opts.pop("rail", rail_name)
         rail = self.rails[rail_name]
         pattern = opts.pop("pattern", None)
         if pattern is not None:
-            rail = dataclasses.replace(rail, patterns={str(pattern): 1.0})
+            rail = dataclasses.replace(rail, patterns={pattern: 1.0})
         demand = opts.pop("demand", "emergency" if emergency else "service")
-        if demand not in ("emergency", "service"):
-            raise ValueError(f"options.demand: {demand!r} is not 'emergency' or 'service'")
-        speed = float(opts.pop("speed_kmh", speed))
+        speed = opts.pop("speed_kmh", speed)
         fixed: dict[str, Any] = {
             "load_factor": load,
             "pad_factor": pad,
@@ -310,10 +329,6 @@ class BrakingCore:
             "demand_fraction": 1.0 if demand == "emergency" else sc.service_demand_fraction,
         }
         fixed.update(opts)
-        if "sections" in fixed:
-            fixed["sections"] = tuple(tuple(float(v) for v in s) for s in fixed["sections"])
-        if "axle_mu_factor" in fixed and fixed["axle_mu_factor"] is not None:
-            fixed["axle_mu_factor"] = tuple(float(v) for v in fixed["axle_mu_factor"])
         fixed["rail_name"] = rail_name
         return draw_run_setup(rail, rng, speed, **fixed)
 
@@ -328,6 +343,7 @@ class BrakingCore:
         sim = self.sim
         sim.configure(e, setup)
         sim.reset([e])
+        self._started[e] = True
         sim.cmd[e] = 1.0
         # drawn after the scenario: the first scenario after seeding is the same with or without
         # the accelerometer (later autoreset draws differ: the bias advanced the generator)
@@ -370,7 +386,9 @@ class BrakingCore:
                 raise ValueError(f"action: expected numbers, got dtype {a.dtype}")
             if np.isnan(a).any():
                 raise ValueError("action: NaN in a valve command (expected values in [-1, 1])")
-            return a if a.dtype in (np.float32, np.float64) else a.astype(np.float64)
+            # float64 whatever the policy gave (SB3 gives float32): one compiled specialisation
+            # of the step, not one per dtype (the kernel computes in float64 either way)
+            return np.ascontiguousarray(a, dtype=np.float64)
         a = a.astype(np.float64)
         if not np.isin(a, (0.0, 1.0, 2.0)).all():
             raise ValueError("action: discrete valve modes must be 0 (vent), 1 (hold) or 2 (fill)")
@@ -404,12 +422,23 @@ class BrakingCore:
         return np.where(a == 0.0, 0.0, np.where(a == 1.0, CMD_HOLD, 1.0))
 
     def step(self, actions: np.ndarray) -> None:
-        """One control period of every environment (checked ``actions``, ``check_actions``)."""
+        """One control period of every environment (checked ``actions``, ``check_actions``);
+        every environment must have been reset (``reset_env``) at least once."""
+        if not self._all_started:
+            self._check_started()
         actions, clipped = self.compose(actions)
         self._step_fn(self.mode, actions, *self._step_args)
         if clipped is not None:  # residual mode
             self.flags[:, K.F_CLIPPED] = clipped
             self._base_stale = True
+
+    def _check_started(self) -> None:
+        """Raise unless every environment has been reset; remember when all have been."""
+        if not self._started.all():
+            waiting = np.flatnonzero(~self._started)
+            which = "" if self.n_envs == 1 else f" (environment {int(waiting[0])} never reset)"
+            raise RuntimeError(f"step before reset: call reset() first{which}")
+        self._all_started = True
 
     def ended(self) -> np.ndarray:
         """``(n_envs,)`` bool: the stops that ended in the last step (standstill or time)."""
@@ -502,6 +531,8 @@ class BrakingCore:
         for k in self._SIM_ARRAYS:
             getattr(self.sim, k)[...] = state["sim"][k]
         self.sim.setups[:] = state["setups"]
+        self._started[:] = [s is not None for s in self.sim.setups]  # a reset env is configured
+        self._all_started = bool(self._started.all())
         for r, s in zip(self.rngs, state["rngs"], strict=True):
             r.bit_generator.state = s
         if self.base is not None:
@@ -539,7 +570,8 @@ class Recorder:
         demand = sim.demand_bar()
         for e in self.env_ids:
             if not done[e]:
-                head = [sim.time_s[e], sim.speed_mps[e], demand[e], self.core.wsp[e, K.W_VREF]]
+                v_ref = self.core.reference_speed_mps[e]
+                head = [sim.time_s[e], sim.speed_mps[e], demand[e], v_ref]
                 head.append(sim.env_state[e, L.ES_DECEL])
                 wheels = [sim.wheel_speed_mps[e], sim.pressure_bar[e], sim.axle_state[e, :, L.AS_F]]
                 self.rows[e].append(np.concatenate([head, *wheels]))

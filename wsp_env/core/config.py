@@ -4,6 +4,10 @@ Every problem raises :class:`ConfigError` with one line that names the file, the
 dotted path) and what is wrong, e.g. ``configs/vehicles/x.yaml: brake.p_max_bar: must be > 0``.
 Unknown fields are errors too (a typo must not silently fall back to a default).
 
+Environment options (``reset(options=...)``, suite cases, CLI flags) are checked against one
+table, ``OPTION_SPECS``, by :func:`check_option` / :func:`check_options`, with the bounds of the
+YAML fields they share (``field_bounds``).
+
 Built-in configs live in the repository's ``configs/`` folder, installed as the package
 ``wsp_env.configs``; a vehicle or rail can be given by id (``uic_z1``) or by a path to a file.
 """
@@ -13,8 +17,10 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import math
+import numbers
 import types
 import typing
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -272,6 +278,11 @@ LAWS = ("polach", "polach_simple", "seed002")
 
 PATTERNS = ("uniform", "step_up", "step_down", "patches")
 
+# The lowest friction level a rail may have: leaf films, the slipperiest rail measured, give
+# about 0.01-0.03; near zero the creep-force laws lose all precision (a level of 1e-20 gives
+# NaN forces), so levels below 0.001 are refused as no rail at all.
+MU_MIN = 0.001
+
 
 @dataclass(frozen=True)
 class RecoveryConfig:
@@ -298,9 +309,9 @@ class RailConfig:
 
     law: str = field(metadata={"choices": LAWS})
     law_params: dict[str, float]
-    mu_clean: float = _pos(le=1.0)
-    mu_contaminated: float = _pos(le=1.0)
-    mu_contaminated_range: tuple[float, ...] = field(metadata={"len": 2, "gt": 0.0, "le": 1.0})
+    mu_clean: float = field(metadata={"ge": MU_MIN, "le": 1.0})
+    mu_contaminated: float = field(metadata={"ge": MU_MIN, "le": 1.0})
+    mu_contaminated_range: tuple[float, ...] = field(metadata={"len": 2, "ge": MU_MIN, "le": 1.0})
     contamination: float = field(metadata={"ge": 0.0, "le": 1.0})
     clean_energy_J_per_m: float = field(metadata={"gt": 0.0, "inf": True})
     pass_removal: float = field(default=0.0, metadata={"ge": 0.0, "le": 1.0})
@@ -358,6 +369,221 @@ class RailConfig:
         defaults = self._LAW_DEFAULTS.get(self.law, {})
         vals = [self.law_params.get(k, defaults.get(k)) for k in self._LAW_KEYS[self.law]]
         return tuple(vals + [0.0] * (4 - len(vals)))  # type: ignore[return-value]
+
+
+# ---- environment options: one table of bounds -----------------------------------------------
+#
+# What ``reset(options=...)`` may fix (``core.braking.BrakingCore.draw_setup``), what a
+# ``core.simulator.RunSetup`` holds, what a scenario suite's case sets (``evaluation.suites``)
+# and what the CLI's flags give are all checked against ``OPTION_SPECS``; where the YAML schema
+# has the same quantity (a rail's adhesion level, its contamination level, the recovery basis)
+# the bounds are that field's metadata, so the two cannot drift apart.
+
+
+def field_bounds(cls: type, name: str) -> dict[str, Any]:
+    """The ``metadata`` (bounds, choices) of dataclass field ``name`` of ``cls`` (a copy)."""
+    for f in dataclasses.fields(cls):
+        if f.name == name:
+            return dict(f.metadata)
+    raise KeyError(f"{cls.__name__} has no field {name!r}")
+
+
+# Gradients: the steepest adhesion-worked lines run at 70-90 per mille (Bernina 70, Uetliberg
+# 79); steeper lines are rack railways, where the rack, not the wheel-rail adhesion a WSP
+# manages, holds the train, so adhesion braking is meaningless there. |g| <= 100 per mille
+# keeps every adhesion railway and refuses typos (a gradient in per cent or in degrees x 1000).
+GRADIENT_LIMIT_PERMILLE = 100.0
+# Per-axle adhesion factors R_i (seed 002 Fig. 8: cleaning raises the level of trailing axles
+# by tens of per cent): a factor above 2 would more than double an axle's friction level, one
+# below 0.01 would take it to nothing (and the level times R_i below MU_MIN's precision).
+AXLE_MU_FACTOR_MIN = 0.01
+AXLE_MU_FACTOR_MAX = 2.0
+# Body masses x load_factor: crush-laden multiple units reach about 1.5 x their nominal body
+# mass; 3 is beyond any vehicle. Pad friction x pad_factor: new or wet pads differ from the
+# nominal coefficient by tens of per cent; 3 would triple it.
+LOAD_FACTOR_MAX = 3.0
+PAD_FACTOR_MAX = 3.0
+DEMANDS = ("emergency", "service")
+_LEVEL = field_bounds(RailConfig, "contamination")  # a contamination level, [0, 1]
+
+
+@dataclass(frozen=True)
+class OptionSpec:
+    """How one environment option is checked: ``kind`` is ``number``, ``choice`` (a string of
+    ``bounds["choices"]``), ``name`` (a non-empty string), ``factors`` (one number per axle)
+    or ``sections`` (``(start_m, end_m, level)`` rows); ``bounds`` as dataclass field metadata
+    (``gt`` / ``ge`` / ``le`` / ``choices``); ``nullable``: None is a value (the rail's or the
+    draw's own)."""
+
+    kind: str
+    bounds: dict[str, Any] = field(default_factory=dict)
+    nullable: bool = False
+    help: str = ""
+
+
+OPTION_SPECS: dict[str, OptionSpec] = {
+    "speed_kmh": OptionSpec(
+        "number", {"gt": 0.0}, help="initial speed (km/h), at most the vehicle's maximum"
+    ),
+    "rail": OptionSpec("name", help="a rail condition of the rail table in use"),
+    "mu_contaminated": OptionSpec(
+        "number", field_bounds(RailConfig, "mu_contaminated"), nullable=True,
+        help="the contaminated adhesion level (None: the rail's nominal one)",
+    ),
+    "pattern": OptionSpec(
+        "choice", {"choices": PATTERNS}, nullable=True, help="spatial pattern (None: drawn)"
+    ),
+    "load_factor": OptionSpec(
+        "number", {"gt": 0.0, "le": LOAD_FACTOR_MAX}, help="body masses x this"
+    ),
+    "pad_factor": OptionSpec(
+        "number", {"gt": 0.0, "le": PAD_FACTOR_MAX}, help="actual / nominal pad friction"
+    ),
+    "gradient_permille": OptionSpec(
+        "number", {"ge": -GRADIENT_LIMIT_PERMILLE, "le": GRADIENT_LIMIT_PERMILLE},
+        help="gradient (per mille, > 0 uphill)",
+    ),
+    "demand": OptionSpec("choice", {"choices": DEMANDS}, help="brake demand"),
+    "sections": OptionSpec(
+        "sections", _LEVEL, help="contaminated stretches (start_m, end_m, level in [0, 1])"
+    ),
+    "axle_mu_factor": OptionSpec(
+        "factors", {"ge": AXLE_MU_FACTOR_MIN, "le": AXLE_MU_FACTOR_MAX}, nullable=True,
+        help="per-axle adhesion factors R_i, one per axle (None: all 1)",
+    ),
+    "recovery_basis": OptionSpec(
+        "choice", {"choices": field_bounds(RecoveryConfig, "basis")["choices"]}, nullable=True,
+        help="override the rail's recovery basis (None: the rail's)",
+    ),
+    "background": OptionSpec(
+        "number", _LEVEL, nullable=True,
+        help="contamination level outside the sections (None: the rail's)",
+    ),
+    "extra_brake_force_N": OptionSpec(
+        "number", {"ge": 0.0}, help="brake force not through the wheels at full demand (N)"
+    ),
+}  # fmt: skip
+
+
+def _interval(spec: dict[str, Any]) -> str:
+    lo = f"({spec['gt']:g}" if "gt" in spec else f"[{spec['ge']:g}" if "ge" in spec else "(-inf"
+    hi = f"{spec['le']:g}]" if "le" in spec else "inf)"
+    return f"{lo}, {hi}"
+
+
+def check_number(value: Any, where: str, **bounds: Any) -> float:
+    """``value`` as a finite float within ``bounds`` (``gt`` / ``ge`` / ``le``, as field
+    metadata; ``inf=True`` lets it be infinite), or :class:`ConfigError` naming ``where``.
+    Numbers of any type (numpy's too, 0-d arrays included) and numeric strings are accepted;
+    booleans are not."""
+    if getattr(value, "ndim", None) == 0 and hasattr(value, "item"):  # a 0-d numpy array
+        value = value.item()
+    if isinstance(value, bool) or not isinstance(value, str | numbers.Real):
+        raise ConfigError(f"{where}: expected a number, got {value!r}")
+    try:
+        v = float(value)
+    except ValueError:  # a string that is not a number
+        raise ConfigError(f"{where}: expected a number, got {value!r}") from None
+    except OverflowError:  # an integer beyond float's range
+        v = math.inf if value > 0 else -math.inf
+    ok = (
+        not math.isnan(v)
+        and (math.isfinite(v) or bool(bounds.get("inf", False)))
+        and ("gt" not in bounds or v > bounds["gt"])
+        and ("ge" not in bounds or v >= bounds["ge"])
+        and ("le" not in bounds or v <= bounds["le"])
+    )
+    if not ok:
+        if "le" in bounds:
+            need = f"in {_interval(bounds)}"
+        else:
+            need = "a number" if bounds.get("inf", False) else "a finite number"
+            if "gt" in bounds or "ge" in bounds:
+                op = ">" if "gt" in bounds else ">="
+                need += f" {op} {bounds.get('gt', bounds.get('ge')):g}"
+        raise ConfigError(f"{where}: must be {need}, got {v:g}")
+    return v
+
+
+def _check_sequence(value: Any, where: str) -> list[Any]:
+    if isinstance(value, str | bytes | Mapping) or not isinstance(value, Iterable):
+        raise ConfigError(f"{where}: expected a list, got {value!r}")
+    return list(value)
+
+
+def check_option(
+    name: str, value: Any, vehicle: VehicleConfig | None = None, where: str | None = None
+) -> Any:
+    """Check one environment option (``OPTION_SPECS``) and return its converted value.
+
+    ``name`` is an option of ``reset(options=...)``; ``value`` its value; with ``vehicle`` the
+    checks that need one are made too (``speed_kmh`` at most its maximum, ``axle_mu_factor``
+    one entry per axle). Returns a float for numbers (numeric strings too), the string for
+    choices and names, a tuple of floats for ``axle_mu_factor``, a tuple of
+    ``(start_m, end_m, level)`` float tuples for ``sections``, None where None is a value.
+    Raises :class:`ConfigError` (a ``ValueError``) with one line naming ``where`` (default
+    ``options.<name>``), e.g. ``options.mu_contaminated: must be in [0.001, 1], got nan``.
+    """
+    where = f"options.{name}" if where is None else where
+    spec = OPTION_SPECS.get(name)
+    if spec is None:
+        raise ConfigError(f"{where}: unknown option (allowed: {', '.join(OPTION_SPECS)})")
+    if value is None and spec.nullable:
+        return None
+    b = spec.bounds
+    if spec.kind == "number":
+        v = check_number(value, where, **b)
+        if name == "speed_kmh" and vehicle is not None and v > vehicle.max_speed_kmh:
+            raise ConfigError(
+                f"{where}: {v:g} km/h exceeds {vehicle.id}'s maximum {vehicle.max_speed_kmh:g} km/h"
+            )
+        return v
+    if spec.kind in ("choice", "name"):
+        if not isinstance(value, str) or not value:
+            raise ConfigError(f"{where}: expected a name, got {value!r}")
+        if spec.kind == "choice" and value not in b["choices"]:
+            raise ConfigError(f"{where}: {value!r} is not one of {', '.join(b['choices'])}")
+        return value
+    items = _check_sequence(value, where)
+    if spec.kind == "factors":
+        if not items:
+            raise ConfigError(f"{where}: must not be empty")
+        if vehicle is not None and len(items) != vehicle.n_axles:
+            raise ConfigError(
+                f"{where}: expected {vehicle.n_axles} entries (one per axle of {vehicle.id}), "
+                f"got {len(items)}"
+            )
+        return tuple(check_number(x, f"{where}[{i}]", **b) for i, x in enumerate(items))
+    assert spec.kind == "sections"
+    # imported here, not at the top: loading a YAML config needs no physics (its JIT cache)
+    from wsp_env.physics.layout import MAX_SECTIONS
+
+    if len(items) > MAX_SECTIONS:
+        raise ConfigError(f"{where}: at most {MAX_SECTIONS} sections, got {len(items)}")
+    out = []
+    for i, row in enumerate(items):
+        here = f"{where}[{i}]"
+        cells = _check_sequence(row, here)
+        if len(cells) != 3:
+            raise ConfigError(f"{here}: expected (start_m, end_m, level), got {row!r}")
+        start = check_number(cells[0], f"{here}[0]", inf=True)  # may be open-ended
+        end = check_number(cells[1], f"{here}[1]", inf=True)
+        if not end > start:
+            raise ConfigError(f"{here}: end_m must exceed start_m, got {start:g} .. {end:g}")
+        out.append((start, end, check_number(cells[2], f"{here}[2]", **b)))
+    return tuple(out)
+
+
+def check_options(
+    options: Mapping[str, Any] | None, vehicle: VehicleConfig | None = None, where: str = "options"
+) -> dict[str, Any]:
+    """Every entry of ``options`` through :func:`check_option` (names as ``where.<name>``);
+    unknown names are refused. Returns the converted options (a new dict, same order)."""
+    if options is None:
+        return {}
+    if not isinstance(options, Mapping):
+        raise ConfigError(f"{where}: expected a mapping, got {options!r}")
+    return {str(k): check_option(str(k), v, vehicle, f"{where}.{k}") for k, v in options.items()}
 
 
 # ---- file loading ---------------------------------------------------------------------------

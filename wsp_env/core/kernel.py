@@ -65,7 +65,7 @@ class State(NamedTuple):
 
 
 # reward terms (columns of ``terms``); the reward is their sum; every term is a cost in metres
-# of stopping distance divided by the distance scale (env.RewardConfig gives the exchange rates)
+# of stopping distance divided by the distance scale (braking.RewardConfig gives the exchange rates)
 R_DISTANCE = 0  # -dx: sums to -stopping_distance
 R_DAMAGE = 1  # -(sum_i f(E_i)) increment, f(E) = m_per_MJ E (1 + E / E_ref), E_i per axle
 R_LOCK = 2  # -lock_m_per_s * (number of locked axles) * dt
@@ -222,7 +222,7 @@ def reset_obs(
 
 
 @njit(**KERNEL_FLAGS)
-def _env_step_one(
+def env_step_one(
     e,
     mode,
     actions,
@@ -352,18 +352,18 @@ def _env_step_one(
 ARG_ENV_PAR = 7  # position of env_par in the entry points' arguments
 
 
-# One signature for both entry points (the arguments of ``_env_step_one`` after ``e``); the
+# One signature for both entry points (the arguments of ``env_step_one`` after ``e``); the
 # serial and ``prange`` variants are separate functions so that each gets its own cache entry.
 @njit(**KERNEL_FLAGS)
 def env_step_serial(*args):
     for e in range(args[ARG_ENV_PAR].shape[0]):
-        _env_step_one(e, *args)
+        env_step_one(e, *args)
 
 
 @njit(parallel=True, **KERNEL_FLAGS)
 def env_step_parallel(*args):
     for e in prange(args[ARG_ENV_PAR].shape[0]):
-        _env_step_one(e, *args)
+        env_step_one(e, *args)
 
 
 def step_args(

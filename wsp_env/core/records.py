@@ -1,6 +1,6 @@
 """What a simulated run records, and the trace format's names for it.
 
-:class:`RunRecord` is a run at the control period, as :meth:`BrakingCore.record` builds it; the
+:class:`RunRecord` is a run at the control period, as ``braking.Recorder.record`` builds it; the
 trace writer (``evaluation.trace_writer``) turns it into logger-like samples, and ``FORMAT`` and
 ``CONTAMINANTS`` are the ``wsp-trace/1`` vocabulary (``docs/trace_format.md``) that configs and
 the calibration's reader share.

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from wsp_env.core.config import RailConfig, VehicleConfig
+from wsp_env.core.config import RailConfig, VehicleConfig, check_number, check_option
 from wsp_env.physics import layout as L
 from wsp_env.physics.adhesion import LAW_NAMES, REC_BASIS_NAMES, tustin_second_order
 from wsp_env.physics.brake import decay_factor, demand_pressures
@@ -49,20 +49,24 @@ class RunSetup:
     extra_brake_force_N: float = 0.0  # brake force not through the wheels, at full demand
 
     def __post_init__(self) -> None:
-        if not (math.isfinite(self.speed_kmh) and self.speed_kmh > 0):
-            raise ValueError(f"speed_kmh: must be a positive number, got {self.speed_kmh}")
-        if len(self.sections) > L.MAX_SECTIONS:
-            raise ValueError(f"sections: at most {L.MAX_SECTIONS} supported")
-        for s in self.sections:
-            if len(s) != 3 or not (0.0 <= s[2] <= 1.0) or not s[1] > s[0]:
-                raise ValueError(f"sections: {s} must be (start_m < end_m, level in [0, 1])")
-        for name in ("demand_fraction", "load_factor", "pad_factor"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"{name}: must be > 0")
-        if self.demand_fraction > 1.0:
-            raise ValueError("demand_fraction: must be <= 1 (the demand cannot exceed p_max)")
-        if self.recovery_basis is not None and self.recovery_basis not in REC_BASIS_NAMES:
-            raise ValueError(f"recovery_basis: one of {', '.join(REC_BASIS_NAMES)}")
+        # the bounds of the environment options (config.OPTION_SPECS), each field named;
+        # values are stored converted (floats, tuples)
+        for name in _OPTION_FIELDS:
+            value = check_option(name, getattr(self, name), where=name)
+            object.__setattr__(self, name, value)
+        frac = check_number(self.demand_fraction, "demand_fraction", gt=0.0, le=1.0)
+        object.__setattr__(self, "demand_fraction", frac)
+        level = check_number(self.injection_level, "injection_level", ge=0.0, le=1.0)
+        object.__setattr__(self, "injection_level", level)
+        until = check_number(self.injection_until_s, "injection_until_s", inf=True)
+        object.__setattr__(self, "injection_until_s", until)
+
+
+# the RunSetup fields that are environment options of the same name
+_OPTION_FIELDS = (
+    "speed_kmh", "mu_contaminated", "background", "sections", "load_factor", "pad_factor",
+    "gradient_permille", "axle_mu_factor", "recovery_basis", "extra_brake_force_N",
+)  # fmt: skip
 
 
 def draw_run_setup(

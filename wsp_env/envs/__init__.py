@@ -2,6 +2,9 @@
 (``wsp_braking``), their ``rgb_array`` frames (``rendering``), and ``make_core``, the core as the
 environments build it (what evaluation, training and the rig build too)."""
 
+from wsp_env.core.braking import RewardConfig, ScenarioConfig
 from wsp_env.envs.wsp_braking import WSPBrakingEnv, WSPBrakingVectorEnv, make_core
 
-__all__ = ["WSPBrakingEnv", "WSPBrakingVectorEnv", "make_core"]
+__all__ = [
+    "RewardConfig", "ScenarioConfig", "WSPBrakingEnv", "WSPBrakingVectorEnv", "make_core",
+]  # fmt: skip

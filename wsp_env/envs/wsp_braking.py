@@ -153,7 +153,7 @@ def make_core(n_envs: int, **kwargs: Any) -> BrakingCore:
     if kwargs.get("action_mode") == "residual":
         from wsp_env.baselines.classical import ClassicalWSP, load_wsp_config
 
-        kwargs["residual_base"] = ClassicalWSP(load_wsp_config())
+        kwargs.setdefault("residual_base", ClassicalWSP(load_wsp_config()))
     return BrakingCore(n_envs, **kwargs)
 
 
@@ -192,7 +192,6 @@ class WSPBrakingEnv(gym.Env):
         )  # fmt: skip
         self.action_space = self.core.action_space()
         self.observation_space = self.core.observation_space()
-        self._reward_terms = np.zeros(K.N_TERMS)
 
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
@@ -274,7 +273,6 @@ class WSPBrakingVectorEnv(VectorEnv):
         self.single_observation_space = self.core.observation_space()
         self.action_space = batch_space(self.single_action_space, num_envs)
         self.observation_space = batch_space(self.single_observation_space, num_envs)
-        self._ended = np.zeros(num_envs, dtype=bool)
 
     def reset(
         self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None

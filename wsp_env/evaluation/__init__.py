@@ -4,7 +4,7 @@
 (``bench``)."""
 
 from wsp_env.evaluation.runner import run_one, run_suite, summarise, trace_metadata
-from wsp_env.evaluation.suites import CaseConfig, SuiteConfig, expand, load_suite, with_option
+from wsp_env.evaluation.suites import CaseConfig, SuiteConfig, expand, load_suite
 
 __all__ = [
     "CaseConfig",
@@ -15,5 +15,4 @@ __all__ = [
     "run_suite",
     "summarise",
     "trace_metadata",
-    "with_option",
 ]

@@ -4,15 +4,16 @@ criteria, and the runs they expand to (``expand``). ``runner.run_suite`` runs th
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from wsp_env.core.braking import OPTION_KEYS
 from wsp_env.core.config import (
+    OPTION_SPECS,
     ConfigError,
     VehicleConfig,
+    check_option,
     configs_root,
     from_dict,
     load_vehicle,
@@ -36,31 +37,59 @@ CRITERIA_KEYS = (
 LOAD_FACTORS = {"tare": 0.85, "nominal": 1.0, "laden": 1.15}
 
 
+def _option(name: str) -> Any:
+    """An optional case field with the environment option's bounds (``config.OPTION_SPECS``)."""
+    return field(default=None, metadata=dict(OPTION_SPECS[name].bounds))
+
+
+# the case fields that are environment options of the same name (``expand`` passes them on)
+CASE_OPTIONS = (
+    "mu_contaminated", "pattern", "load_factor", "gradient_permille", "recovery_basis",
+    "axle_mu_factor", "extra_brake_force_N", "sections",
+)  # fmt: skip
+
+
 @dataclass(frozen=True)
 class CaseConfig:
     name: str
     rail: str
     speeds_kmh: tuple[str, ...] = field(metadata={"nonempty": True})
     vehicle: str | None = None  # a vehicle id or file; None: the suite run's vehicle
-    mu_contaminated: float | None = field(default=None, metadata={"gt": 0.0})
-    pattern: str | None = field(
-        default=None, metadata={"choices": ("uniform", "step_up", "step_down", "patches")}
-    )
-    demand: str = field(default="emergency", metadata={"choices": ("emergency", "service")})
+    mu_contaminated: float | None = _option("mu_contaminated")
+    pattern: str | None = _option("pattern")
+    demand: str = field(default="emergency", metadata=OPTION_SPECS["demand"].bounds)
     load: str | None = field(default=None, metadata={"choices": tuple(LOAD_FACTORS)})
-    load_factor: float | None = field(default=None, metadata={"gt": 0.0})
-    gradient_permille: float | None = None
-    recovery_basis: str | None = field(
-        default=None, metadata={"choices": ("rail_metre", "wheel_metre", "sliding_power")}
-    )
-    axle_mu_factor: tuple[float, ...] | None = field(default=None, metadata={"gt": 0.0})
-    extra_brake_force_N: float | None = field(default=None, metadata={"ge": 0.0})
-    sections: tuple[tuple[float, ...], ...] | None = None
+    load_factor: float | None = _option("load_factor")
+    gradient_permille: float | None = _option("gradient_permille")
+    recovery_basis: str | None = _option("recovery_basis")
+    axle_mu_factor: tuple[float, ...] | None = _option("axle_mu_factor")
+    extra_brake_force_N: float | None = _option("extra_brake_force_N")
+    sections: tuple[tuple[float, ...], ...] | None = None  # checked whole in ``validate``
     criteria: dict[str, float] = field(default_factory=dict)
 
     def validate(self, where: str) -> None:
         if self.load is not None and self.load_factor is not None:
             raise ConfigError(f"{where}.load: give load or load_factor, not both")
+        prefix = f"{where}." if where else ""
+        for key in CASE_OPTIONS:  # the options' own checks (a section's shape, ...)
+            value = getattr(self, key)
+            if value is not None:
+                check_option(key, value, where=prefix + key)
+
+
+def _speed(s: str, veh: VehicleConfig | None, where: str) -> float:
+    """A case's speed entry (a number or ``max``) in km/h; with ``veh`` at most its maximum."""
+    if s == "max" and veh is not None:
+        return veh.max_speed_kmh
+    try:
+        v = check_option("speed_kmh", s, where=where)
+    except ConfigError:
+        raise ConfigError(f"{where}: {s!r} is not a speed (a finite number > 0) or 'max'") from None
+    if veh is not None and v > veh.max_speed_kmh:
+        raise ConfigError(
+            f"{where} {v:g} km/h exceeds {veh.id}'s maximum {veh.max_speed_kmh:g} km/h"
+        )
+    return v
 
 
 @dataclass(frozen=True)
@@ -78,20 +107,20 @@ class SuiteConfig:
                 raise ConfigError(
                     f"{prefix}criteria.{key}: unknown (one of {', '.join(CRITERIA_KEYS)})"
                 )
+        first: dict[str, int] = {}
         for i, case in enumerate(self.cases):
+            if case.name in first:  # their runs would merge in the results
+                raise ConfigError(
+                    f"{prefix}cases[{i}].name: {case.name!r} repeats cases[{first[case.name]}]'s "
+                    "(case names must be unique)"
+                )
+            first[case.name] = i
             for key in case.criteria:
                 if key not in CRITERIA_KEYS:
                     raise ConfigError(f"{prefix}cases[{i}].criteria.{key}: unknown criterion")
             for s in case.speeds_kmh:
                 if s != "max":
-                    try:
-                        ok = float(s) > 0
-                    except ValueError:
-                        ok = False
-                    if not ok:
-                        raise ConfigError(
-                            f"{prefix}cases[{i}].speeds_kmh: {s!r} is not a speed or 'max'"
-                        )
+                    _speed(s, None, f"{prefix}cases[{i}].speeds_kmh")
 
 
 def load_suite(name_or_path: str) -> SuiteConfig:
@@ -125,23 +154,44 @@ class Run:
 
 
 def expand(suite: SuiteConfig, vehicle: VehicleConfig) -> list[Run]:
-    """Cases x speeds x seeds, in a fixed order (a case may name its own vehicle)."""
+    """Cases x speeds x seeds, in a fixed order (a case may name its own vehicle).
+
+    Each case is checked against the vehicle it runs on (speeds at most its maximum, one
+    ``axle_mu_factor`` per axle, the options' bounds: ``config.OPTION_SPECS``), and no two
+    runs may share a name (their results would merge): a ``ConfigError`` naming the suite,
+    the case and the problem, e.g. ``suite quick: case soap_low: speed 1e+09 km/h exceeds
+    uic_z1's maximum 200 km/h``."""
     runs = []
     vehicles: dict[str, VehicleConfig] = {}
+    made: dict[str, tuple[str, str, float]] = {}  # run name -> (case, speed entry, km/h)
     for case in suite.cases:
         veh = vehicle
         if case.vehicle is not None:
             veh = vehicles.setdefault(case.vehicle, load_vehicle(case.vehicle))
+        here = f"suite {suite.name}: case {case.name}"
+        for key in CASE_OPTIONS:
+            value = getattr(case, key)
+            if value is not None:
+                try:
+                    check_option(key, value, veh, where=key)
+                except ConfigError as err:
+                    raise ConfigError(f"{here}: {err}") from None
         for s in case.speeds_kmh:
-            speed = veh.max_speed_kmh if s == "max" else float(s)
+            speed = _speed(s, veh, f"{here}: speed")
             name = f"{case.name}_{round(speed)}"
+            if name in made:
+                other, entry, km_h = made[name]
+                if other == case.name and km_h == speed:  # 'max' is a listed speed: one run
+                    continue
+                raise ConfigError(
+                    f"{here}: speed {s} makes run {name} on {veh.id}, as case {other} speed "
+                    f"{entry} does (runs of one name would merge in the results)"
+                )
+            made[name] = (case.name, s, speed)
             options: dict[str, Any] = {"rail": case.rail, "speed_kmh": speed, "demand": case.demand}
             if case.load is not None:
                 options["load_factor"] = LOAD_FACTORS[case.load]
-            for key in (
-                "mu_contaminated", "pattern", "load_factor", "gradient_permille",
-                "recovery_basis", "axle_mu_factor", "extra_brake_force_N", "sections",
-            ):  # fmt: skip
+            for key in CASE_OPTIONS:
                 value = getattr(case, key)
                 if value is not None:
                     options[key] = value
@@ -149,9 +199,3 @@ def expand(suite: SuiteConfig, vehicle: VehicleConfig) -> list[Run]:
             criteria = {**suite.criteria, **case.criteria}
             runs.extend(Run(name, seed, options, criteria, veh) for seed in suite.seeds)
     return runs
-
-
-def with_option(suite: SuiteConfig, **changes: Any) -> SuiteConfig:
-    """A copy of ``suite`` with every case changed (e.g. ``mu_contaminated``)."""
-    cases = tuple(dataclasses.replace(c, **changes) for c in suite.cases)
-    return dataclasses.replace(suite, cases=cases)

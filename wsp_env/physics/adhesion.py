@@ -236,6 +236,14 @@ PEAK_XI_MIN, PEAK_XI_MAX = 1e-4, 0.6
 
 
 @njit(cache=True, error_model="numpy")
+def adhesion_value(law, axi, w, mu_level, mu_rec, k_w, k, inv_k, p0, p1, p2, p3):
+    """``adhesion(...)[0]`` as a called (not inlined) function: ``peak_adhesion`` evaluates the
+    curve at four places, and the whole law library inlined at each made it the slowest kernel
+    to compile (the same floating-point operations either way)."""
+    return adhesion(law, axi, w, mu_level, mu_rec, k_w, k, inv_k, p0, p1, p2, p3)[0]
+
+
+@njit(cache=True, error_model="numpy")
 def peak_adhesion(law, level, mu_rec, kw, k, inv_k, v, p0, p1, p2, p3):
     """Creepage and coefficient at the peak of the curve ``mu(xi, DV = xi V)`` at speed ``v``.
 
@@ -247,7 +255,7 @@ def peak_adhesion(law, level, mu_rec, kw, k, inv_k, v, p0, p1, p2, p3):
     best = -1.0
     for i in range(PEAK_GRID):
         xi = math.exp(log_lo + i * step)
-        m = adhesion(law, xi, xi * v, level, mu_rec, kw, k, inv_k, p0, p1, p2, p3)[0]
+        m = adhesion_value(law, xi, xi * v, level, mu_rec, kw, k, inv_k, p0, p1, p2, p3)
         if m > best:
             best = m
             best_i = i
@@ -255,13 +263,13 @@ def peak_adhesion(law, level, mu_rec, kw, k, inv_k, v, p0, p1, p2, p3):
     if 0 < best_i < PEAK_GRID - 1:
         x0 = math.exp(log_xi - step)
         x2 = math.exp(log_xi + step)
-        a = adhesion(law, x0, x0 * v, level, mu_rec, kw, k, inv_k, p0, p1, p2, p3)[0]
-        c = adhesion(law, x2, x2 * v, level, mu_rec, kw, k, inv_k, p0, p1, p2, p3)[0]
+        a = adhesion_value(law, x0, x0 * v, level, mu_rec, kw, k, inv_k, p0, p1, p2, p3)
+        c = adhesion_value(law, x2, x2 * v, level, mu_rec, kw, k, inv_k, p0, p1, p2, p3)
         den = a - 2.0 * best + c
         if den < 0.0:
             log_xi += 0.5 * step * (a - c) / den
     xi = math.exp(log_xi)
-    m = adhesion(law, xi, xi * v, level, mu_rec, kw, k, inv_k, p0, p1, p2, p3)[0]
+    m = adhesion_value(law, xi, xi * v, level, mu_rec, kw, k, inv_k, p0, p1, p2, p3)
     if m < best:
         return math.exp(log_lo + best_i * step), best
     return xi, m

@@ -3,7 +3,7 @@
 numba's ``cache=True`` keys each cached function on its *own* source file only. Our kernels
 call each other across files (the environment step inlines the physics step, which inlines the
 creep laws), so editing ``adhesion.py`` would leave a stale compiled ``integrator`` or
-``env_kernel`` in the cache — silently running old physics. Before any kernel module is
+``core/kernel`` in the cache — silently running old physics. Before any kernel module is
 imported, this hashes every kernel source file and, when the hash differs from the one recorded
 next to the cache, deletes the package's cached kernels so that they recompile.
 """
@@ -65,3 +65,9 @@ def refresh() -> None:
     with contextlib.suppress(OSError):
         stamp.parent.mkdir(exist_ok=True)
         stamp.write_text(current)
+
+
+def compiled() -> bool:
+    """Whether the environment step is in the on-disk cache (False on a first run, and after a
+    kernel source changed): the first stepping command then compiles for a while."""
+    return any((PACKAGE / "core" / "__pycache__").glob("kernel.env_step_serial-*.nbi"))

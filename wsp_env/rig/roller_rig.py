@@ -60,7 +60,7 @@ from numba import njit
 
 from wsp_env.core.config import ConfigError, VehicleConfig, from_dict, load_vehicle
 from wsp_env.envs import make_core
-from wsp_env.evaluation.runner import one_run
+from wsp_env.evaluation.runner import one_run, run_one
 from wsp_env.evaluation.suites import expand
 from wsp_env.physics import layout as L
 from wsp_env.physics.brake import (
@@ -510,7 +510,6 @@ def rig_test(
     """A braking test on the rig and, for the same policy and scenario, on the virtual track
     alone (``runner.run_one``: the evaluation's code path): the rig indices and the comparison.
     ``policy``: a policy object or a name / model path (``policy.make_policy``)."""
-    from wsp_env.evaluation.runner import run_one
     from wsp_env.policy import make_policy
 
     make = (lambda: make_policy(policy)) if isinstance(policy, str) else (lambda: policy)

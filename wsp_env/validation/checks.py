@@ -25,9 +25,9 @@ The adhesion model must hold these together (DESIGN §3); each has a pass flag:
 * ``dry_quiet`` — on dry rail (and on wet rail whose adhesion exceeds the demand) the classical
   WSP vents no air and stops within 1 % of ``none``.
 * ``rig`` — seed 002's braking test (the test vehicle's WSP, nominal pads) on the virtual roller
-  rig (``rig.py``, seed 002 §3) and on the virtual track alone: the rig reproduces the track's
-  stop within ``RIG_STOP_TOL`` (1 %), and the speed error ``e_omega`` (seed 002 §5.2.2, Fig. 18)
-  has an RMS below ``RIG_E_OMEGA_RMS_KMH`` on every axle (0.5 km/h: under 4 % of the test's
+  rig (``rig/roller_rig.py``, seed 002 §3) and on the virtual track alone: the rig reproduces the
+  track's stop within ``RIG_STOP_TOL`` (1 %), and the speed error ``e_omega`` (seed 002 §5.2.2,
+  Fig. 18) has an RMS below ``RIG_E_OMEGA_RMS_KMH`` on every axle (0.5 km/h: under 4 % of the test's
   13 km/h mean sliding, Table 6). The torque estimation error is reported.
 * ``seed002_traction`` — seed 002's traction test (E402B from 5 km/h, 12,300 N m per axle,
   Table 8's soap with axle 1 at ``R_1 mu_c``, the recovery by Eqs. 9-10 as written, the E402B
@@ -285,9 +285,11 @@ def run_validation(report: str | Path | None = None) -> dict[str, Any]:
     locked = out.pop("locked_vs_wsp")
     out["locked_vs_wsp"] = locked["runs"]
     out["locked_vs_wsp_passed"] = locked["passed"]
+    traction = out["seed002_traction"]  # in the verdict unless listed in OPEN_CHECKS
     out["passed"] = all(
         (out["seed002"]["passed"], out["seed000"]["passed"], locked["passed"],
-         out["dry_quiet"]["passed"], out["rig"]["passed"])
+         out["dry_quiet"]["passed"], out["rig"]["passed"],
+         traction["passed"] or not traction["in_overall_verdict"])
     )  # fmt: skip
     return out
 
