@@ -200,6 +200,11 @@ def cmd_simulate(args: argparse.Namespace) -> dict[str, Any]:
     from wsp_env.evaluation.trace_writer import SensorModel, sample_run, stem_path, write_trace
 
     vehicle = _vehicle_for_speed(args.vehicle, args.speed_kmh)
+    control_period_s = 0.02  # the environment's default BCU cycle
+    if abs(round(control_period_s / args.dt_s) * args.dt_s - control_period_s) > 1e-9:
+        raise UserError(
+            f"--dt-s: must divide the {control_period_s} s control period, got {args.dt_s:g}"
+        )
     rail = load_rail(args.rail, args.rails_config)  # a bad table or rail fails here, named
     (policy,) = _policies([args.policy], args.wsp_config)
     plot_tmp = _reserve(args, "plot", "--plot")
@@ -713,8 +718,9 @@ def cmd_traction(args: argparse.Namespace) -> dict[str, Any]:
     plot_tmp = _reserve(args, "plot", "--plot")
     antiskid = None
     if args.antiskid_config:
+        fields = read_yaml(Path(args.antiskid_config)) or {}  # a missing file: named there
         try:
-            cfg = from_dict(AntiSkidConfig, read_yaml(Path(args.antiskid_config)) or {}, "")
+            cfg = from_dict(AntiSkidConfig, fields, "")
         except ConfigError as err:
             raise ConfigError(f"{args.antiskid_config}: {err}") from None
         antiskid = AntiSkid(cfg)

@@ -330,6 +330,8 @@ def _check_jumps(path: Path, v_kmh: np.ndarray, t: np.ndarray) -> None:
 def read_trace(csv_path: str | Path) -> Trace:
     """Read and validate ``NAME.csv`` + ``NAME.meta.json`` (see the module docstring)."""
     path = Path(csv_path)
+    if not path.is_file():
+        raise _fail(path, "no such file" if not path.exists() else "not a file")
     meta_path, meta = _read_meta(path)
     header, body = _read_csv(path)
     cols, notes = _canonical(path, header, body)
