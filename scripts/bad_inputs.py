@@ -372,7 +372,9 @@ def run_case(case: Case, fixtures: Path) -> Outcome:
         os.chdir(cwd)
         left = _files(work) - before
         shutil.rmtree(work, ignore_errors=True)
-    lines = [ln for ln in err.getvalue().splitlines() if ln.strip()]
+    from wsp_env.cli import COMPILE_NOTICE  # a first run's notice is no error line
+
+    lines = [ln for ln in err.getvalue().splitlines() if ln.strip() and ln != COMPILE_NOTICE]
     if code == 0:
         return _outcome(case, "wrong result", "exit 0", t0)
     if left:

@@ -1,0 +1,113 @@
+"""A command's outputs all or none (``files.Outputs``, the CLI): checked before the work,
+written together at the end, removed on failure, and what a killed run left is cleared."""
+
+from __future__ import annotations
+
+import os
+import stat
+import subprocess
+import sys
+
+import pytest
+
+from wsp_env.cli import main
+from wsp_env.files import OutputError, Outputs, replace_dir_atomically
+
+
+def test_commit_moves_every_output_into_place(tmp_path):
+    with Outputs() as out:
+        json_tmp = out.reserve(tmp_path / "new" / "r.json", "--json")
+        stem_tmp = out.reserve(tmp_path / "t", "--trace", "stem")
+        json_tmp.write_text("{}")
+        stem_tmp.with_name(stem_tmp.name + ".csv").write_text("a\n")
+        stem_tmp.with_name(stem_tmp.name + ".meta.json").write_text("{}")
+        assert not (tmp_path / "new" / "r.json").exists()  # nothing final before the commit
+        out.commit()
+    assert sorted(p.name for p in tmp_path.rglob("*") if p.is_file()) == [
+        "r.json", "t.csv", "t.meta.json"
+    ]  # fmt: skip
+
+
+def test_a_failure_leaves_nothing_not_even_a_folder(tmp_path):
+    with pytest.raises(RuntimeError), Outputs() as out:
+        out.reserve(tmp_path / "a" / "b" / "r.json", "--json").write_text("{}")
+        report = out.reserve(tmp_path / "rep", "--report", "dir")
+        replace_dir_atomically(report, lambda d: (d / "report.md").write_text("x"))
+        raise RuntimeError("the work failed")
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    ("path", "kind", "message"),
+    [
+        ("folder", "file", "is a folder"),
+        ("mine", "dir", "not a wsp-env report folder"),
+        ("plain.txt", "dir", "is not a folder"),
+        ("plain.txt/x.json", "file", "is not a folder"),
+    ],
+)
+def test_a_path_that_cannot_be_written_is_refused_before_the_work(tmp_path, path, kind, message):
+    (tmp_path / "folder").mkdir()
+    (tmp_path / "mine").mkdir()
+    (tmp_path / "mine" / "notes.txt").write_text("mine")
+    (tmp_path / "plain.txt").write_text("x")
+    with pytest.raises(OutputError, match=message), Outputs() as out:
+        out.reserve(tmp_path / path, "--opt", kind)
+
+
+def test_the_same_path_twice_is_refused(tmp_path):
+    with pytest.raises(OutputError, match="also another output"), Outputs() as out:
+        out.reserve(tmp_path / "x.png", "--json")
+        out.reserve(tmp_path / "x.png", "--plot")
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root writes anywhere")
+def test_a_folder_without_write_permission_is_refused(tmp_path):
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    locked.chmod(stat.S_IRUSR | stat.S_IXUSR)
+    with pytest.raises(OutputError, match="permission denied"), Outputs() as out:
+        out.reserve(locked / "x.json", "--json")
+
+
+def test_a_killed_runs_temps_are_cleared_by_the_next_run(tmp_path):
+    """kill -9 runs no cleanup: the next run of the same output removes a dead process's
+    temps (their names carry its pid); a living process's are left alone."""
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
+                          capture_output=True, text=True, check=True).stdout.strip()  # fmt: skip
+    stale = tmp_path / f".wsp-{dead}-abcdef.r.json"
+    stale.write_text("half")
+    stale_dir = tmp_path / f".wsp-{dead}-abcdef.rep"
+    stale_dir.mkdir()
+    alive = tmp_path / f".wsp-{os.getppid()}-abcdef.r.json"
+    alive.write_text("someone else's")
+    with Outputs() as out:
+        out.reserve(tmp_path / "r.json", "--json").write_text("{}")
+        out.reserve(tmp_path / "rep", "--report", "dir").mkdir()
+        out.commit()
+    assert not stale.exists() and not stale_dir.exists() and alive.exists()
+
+
+def test_the_cli_writes_no_output_when_one_producer_fails(tmp_path, monkeypatch, capsys):
+    import wsp_env.evaluation.plotting as plotting
+
+    def broken(*args, **kwargs):
+        raise OSError("disk full")
+
+    monkeypatch.setattr(plotting, "plot_run", broken)
+    out = tmp_path / "o"
+    argv = ["simulate", "--speed-kmh", "30", "--json", str(out / "s.json"),
+            "--trace", str(out / "t"), "--plot", str(out / "p.png")]  # fmt: skip
+    assert main(argv) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert err[-1] == "wsp-env simulate: error: disk full"
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_report_folders_get_the_usual_mode(tmp_path):
+    old = os.umask(0o022)
+    try:
+        replace_dir_atomically(tmp_path / "rep", lambda d: (d / "report.md").write_text("x"))
+    finally:
+        os.umask(old)
+    assert stat.S_IMODE((tmp_path / "rep").stat().st_mode) == 0o755
