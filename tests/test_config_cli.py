@@ -190,10 +190,11 @@ def test_simulate_runs_the_wsp_policies_on_the_evaluation_path(tmp_path):
 
 
 def test_a_first_run_says_it_is_compiling(tmp_path, monkeypatch, capsys):
-    """While numba compiles (tens of seconds on a first run) the command says so, on stderr;
-    a warm run says nothing of it."""
+    """While numba compiles (tens of seconds on a first run) the command says so on a terminal's
+    stderr; a warm run says nothing of it."""
     import wsp_env.cli as cli
 
+    monkeypatch.setattr(cli, "stderr_is_terminal", lambda: True)  # a terminal (capsys is none)
     monkeypatch.setattr(cli, "compiled", lambda: False)
     assert cli.main(["simulate", "--speed-kmh", "30"]) == 0
     assert capsys.readouterr().err.splitlines() == [cli.COMPILE_NOTICE]

@@ -821,10 +821,16 @@ COMPILE_NOTICE = (
 )
 
 
+def stderr_is_terminal() -> bool:
+    """Someone watches stderr (a terminal): say what a long silence is. Logs and pipes get only
+    the command's own lines (errors stay one line)."""
+    return sys.stderr.isatty()
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    if args.command in COMPILING and not compiled():
+    if args.command in COMPILING and stderr_is_terminal() and not compiled():
         print(COMPILE_NOTICE, file=sys.stderr, flush=True)
     try:
         with Outputs() as outputs:  # every output checked first, all written at the end or none
