@@ -20,7 +20,8 @@ import platform
 import shlex
 import shutil
 import sys
-from collections.abc import Iterator
+import time
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import TextIO
 
@@ -98,6 +99,16 @@ def tee_stdout() -> Iterator[io.StringIO]:
     tee = _Tee(sys.stdout)
     with contextlib.redirect_stdout(tee):
         yield tee
+
+
+def printed_results(markdown: str | Path | None, title: str, run: Callable[[], None]) -> None:
+    """Run ``run`` printing as usual; with ``markdown``, write what it printed there too."""
+    t0 = time.perf_counter()
+    with tee_stdout() as printed:
+        run()
+    if markdown is not None:
+        write_results(markdown, title, fenced(printed.getvalue()), time.perf_counter() - t0)
+        print(f"wrote {markdown}")
 
 
 def fenced(text: str) -> str:

@@ -21,7 +21,7 @@ import types
 from pathlib import Path
 
 import numpy as np
-from _results_md import fenced, tee_stdout, write_results
+from _results_md import printed_results
 
 SOURCE = Path(__file__).resolve().parent.parent / "wsp_env/physics/integrator.py"
 VARIANTS = {
@@ -93,13 +93,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--markdown", default=None, help="also write the figures here")
     args = ap.parse_args()
-    t0 = time.perf_counter()
-    with tee_stdout() as printed:
-        profile()
-    if args.markdown:
-        title = "Where the physics kernel's time goes"
-        write_results(args.markdown, title, fenced(printed.getvalue()), time.perf_counter() - t0)
-        print(f"wrote {args.markdown}")
+    printed_results(args.markdown, "Where the physics kernel's time goes", profile)
 
 
 def profile() -> None:

@@ -14,10 +14,9 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import time
 
 import numpy as np
-from _results_md import fenced, tee_stdout, write_results
+from _results_md import printed_results
 
 from wsp_env.evaluation import load_suite, run_suite
 from wsp_env.policy import make_policy
@@ -32,13 +31,8 @@ def main() -> None:
     ap.add_argument("--out", default="docs/learned_vs_classical.png")
     ap.add_argument("--markdown", default=None, help="also write the printed figures here")
     args = ap.parse_args()
-    t0 = time.perf_counter()
-    with tee_stdout() as printed:
-        figures(args)
-    if args.markdown:
-        title = f"Where `{args.policy}`'s gain comes from"
-        write_results(args.markdown, title, fenced(printed.getvalue()), time.perf_counter() - t0)
-        print(f"wrote {args.markdown}")
+    title = f"Where `{args.policy}`'s gain comes from"
+    printed_results(args.markdown, title, lambda: figures(args))
 
 
 def figures(args: argparse.Namespace) -> None:

@@ -15,7 +15,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from _results_md import fenced, tee_stdout, write_results
+from _results_md import printed_results
 
 from wsp_env.core.config import load_rail, load_vehicle
 from wsp_env.core.metrics import run_metrics
@@ -41,13 +41,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--markdown", type=Path, default=None, help="also write the figures here")
     args = ap.parse_args()
-    t0 = time.perf_counter()
-    with tee_stdout() as printed:
-        figures()
-    if args.markdown is not None:
-        title = "Physics core: accuracy and speed"
-        write_results(args.markdown, title, fenced(printed.getvalue()), time.perf_counter() - t0)
-        print(f"wrote {args.markdown}")
+    printed_results(args.markdown, "Physics core: accuracy and speed", figures)
 
 
 def figures() -> None:

@@ -17,11 +17,10 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import time
 from pathlib import Path
 
 import numpy as np
-from _results_md import fenced, tee_stdout, write_results
+from _results_md import printed_results
 
 from wsp_env.baselines.classical import ClassicalWSP, WSPConfig, load_wsp_config
 from wsp_env.core.config import configs_root, load_rails
@@ -109,13 +108,8 @@ def main() -> None:
     if args.search:
         search(args.n, args.seed, args.write)
         return
-    t0 = time.perf_counter()
-    with tee_stdout() as printed:
-        reproduce(args)
-    if args.markdown is not None:
-        title = "Seed 002 braking test reproduction"
-        write_results(args.markdown, title, fenced(printed.getvalue()), time.perf_counter() - t0)
-        print(f"wrote {args.markdown}")
+    title = "Seed 002 braking test reproduction"
+    printed_results(args.markdown, title, lambda: reproduce(args))
 
 
 def reproduce(args: argparse.Namespace) -> None:

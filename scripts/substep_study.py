@@ -8,10 +8,9 @@
 from __future__ import annotations
 
 import argparse
-import time
 
 import numpy as np
-from _results_md import fenced, tee_stdout, write_results
+from _results_md import printed_results
 
 from wsp_env.core.config import load_rail, load_vehicle
 from wsp_env.core.simulator import RunSetup, TrainSim
@@ -40,13 +39,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--markdown", default=None, help="also write the figures here")
     args = ap.parse_args()
-    t0 = time.perf_counter()
-    with tee_stdout() as printed:
-        study()
-    if args.markdown:
-        title = "Stopping distance against the physics substep"
-        write_results(args.markdown, title, fenced(printed.getvalue()), time.perf_counter() - t0)
-        print(f"wrote {args.markdown}")
+    printed_results(args.markdown, "Stopping distance against the physics substep", study)
 
 
 def study() -> None:
