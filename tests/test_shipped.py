@@ -7,12 +7,13 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import shutil
 import statistics
 
 import pytest
 
 from wsp_env.evaluation import load_suite, run_suite
-from wsp_env.policy import make_policy, pretrained_dir, shipped_policies
+from wsp_env.policy import make_policy, model_metadata, pretrained_dir, shipped_policies
 
 SHIPPED = shipped_policies()
 
@@ -45,3 +46,20 @@ def test_shipped_policy_beats_the_classical_wsp_on_heldout_firsts(name):
     assert mean(learned, "stopping_distance_m") < mean(classical, "stopping_distance_m")
     assert mean(learned, "sliding_energy_kJ") <= mean(classical, "sliding_energy_kJ")
     assert all(r["stopped"] for r in learned)
+
+
+@pytest.mark.parametrize("name", SHIPPED)
+def test_shipped_policy_needs_its_normalisation(name, tmp_path):
+    """The shipped model's metadata predates the ``obs_normalization`` field: the config it was
+    trained with (``NAME.yaml`` beside it) tells, so it loads normalised, and copied with that
+    config but without its statistics file it is refused in one line. Copied alone, nothing
+    tells: it loads as models written before the field always did."""
+    folder = pretrained_dir()
+    assert model_metadata(folder / f"{name}.zip")["obs_normalization"] is True
+    assert make_policy(name).normalisation() is not None
+    shutil.copy(folder / f"{name}.zip", tmp_path / f"{name}.zip")
+    assert model_metadata(tmp_path / f"{name}.zip")["obs_normalization"] is None
+    assert make_policy(str(tmp_path / f"{name}.zip")).normalisation() is None
+    shutil.copy(folder / f"{name}.yaml", tmp_path / f"{name}.yaml")
+    with pytest.raises(ValueError, match=rf"{name}\.vecnormalize\.pkl is missing"):
+        make_policy(str(tmp_path / f"{name}.zip"))

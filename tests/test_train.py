@@ -4,9 +4,11 @@ the machinery, not learning."""
 
 from __future__ import annotations
 
+import csv
 import json
 import pickle
 import shutil
+import zipfile
 
 import numpy as np
 import pytest
@@ -17,9 +19,9 @@ from wsp_env.cli import main
 from wsp_env.core.braking import BrakingCore
 from wsp_env.envs import WSPBrakingVectorEnv
 from wsp_env.evaluation import load_suite, run_suite
-from wsp_env.policy import SB3Policy, make_policy
+from wsp_env.policy import META_NAME, SB3Policy, make_policy, model_metadata, write_model_metadata
 from wsp_env.training.config import LinearSchedule, load_train_config
-from wsp_env.training.train import latest_checkpoint
+from wsp_env.training.train import latest_checkpoint, merge_progress
 
 SUITE = {
     "name": "tiny",
@@ -183,6 +185,10 @@ def test_resume_in_chunks_is_bit_for_bit(tmp_path, kind):
     # the chunked run's history holds both evaluations, as the one-go run's does
     hist = json.loads((rest / "validation.json").read_text())["history"]
     assert [h["timesteps"] for h in hist] == [int(half), 2 * int(half)]
+    # both calls' CSV logs in one progress.csv: each timestep once, in order
+    with (rest / "progress.csv").open(newline="") as fh:
+        steps = [int(float(r["time/total_timesteps"])) for r in csv.DictReader(fh)]
+    assert steps == sorted(set(steps)) and (kind == "sac" or steps[-1] > int(half))
 
 
 def test_another_seed_is_another_run(ppo_run, tmp_path):
@@ -322,7 +328,7 @@ def test_a_run_failing_before_its_first_checkpoint_leaves_no_folder(tmp_path, mo
     def broken(*args, **kwargs):
         raise RuntimeError("broken on purpose")
 
-    monkeypatch.setattr(training, "_merge_progress", broken)  # fails at the very end
+    monkeypatch.setattr(training, "merge_progress", broken)  # fails at the very end
     out = tmp_path / "run"
     monkeypatch.setattr(training, "_save_checkpoint", broken)
     with pytest.raises(RuntimeError):
@@ -334,3 +340,92 @@ def test_resume_refuses_a_second_config(ppo_run, capsys):
     _, tmp, out = ppo_run
     assert main(["train", "--resume", str(out), "--config", str(train_config(tmp))]) == 2
     assert "--config" in capsys.readouterr().err
+
+
+def _progress(path, rows, extra="train/loss"):
+    path.parent.mkdir(parents=True)
+    with path.open("w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=["time/total_timesteps", extra])
+        w.writeheader()
+        w.writerows({"time/total_timesteps": n, extra: v} for n, v in rows)
+
+
+def test_progress_after_kill_and_resume_is_one_row_per_timestep_in_order(tmp_path):
+    """A run killed at 768 after its checkpoint at 512 and resumed from it logged 640 and 768
+    twice: the merged CSV has each timestep once, in order, the resumed call's row winning, and
+    nothing of the killed call's steps past 512 (576: a branch the resume discarded)."""
+    logs = tmp_path / "logs"
+    old = [(128, "a"), (256, "a"), (384, "a"), (512, "a"), (576, "a"), (640, "a"), (768, "a")]
+    _progress(logs / "from_step_0" / "progress.csv", old)
+    new = [(640, "b"), (768, "b"), (896, "b"), (1024, "b")]
+    _progress(logs / "from_step_512" / "progress.csv", new, extra="validation/passed")
+    _progress(logs / "from_step_1024" / "progress.csv", [(1152, "c"), (1152, "d")])
+    merge_progress(tmp_path)
+    with (tmp_path / "progress.csv").open(newline="") as fh:
+        reader = csv.DictReader(fh)
+        rows = list(reader)
+    assert reader.fieldnames == ["time/total_timesteps", "train/loss", "validation/passed"]
+    steps = [int(r["time/total_timesteps"]) for r in rows]
+    assert steps == [128, 256, 384, 512, 640, 768, 896, 1024, 1152]
+    assert [r["train/loss"] for r in rows[:4]] == ["a"] * 4
+    assert [r["validation/passed"] for r in rows[4:8]] == ["b"] * 4
+    assert [r["train/loss"] for r in rows[4:8]] == [""] * 4  # the resumed call's rows, whole
+    assert rows[-1]["train/loss"] == "d"  # a timestep logged twice: the later row
+
+
+def test_the_model_file_says_it_needs_its_normalisation(ppo_run, tmp_path, capsys):
+    """A model trained on normalised observations, copied without its normalisation file, is
+    refused in one line naming the missing file (by make_policy and by evaluate), never used
+    un-normalised."""
+    _, tmp, out = ppo_run
+    meta = model_metadata(out / "best_model.zip")
+    assert meta["obs_normalization"] is True and meta["frame_stack"] == 1
+    assert (
+        meta["env_kwargs"]["privileged"] is False and meta["env_kwargs"]["accelerometer"] is False
+    )
+    alone = tmp_path / "alone"
+    alone.mkdir()
+    shutil.copy(out / "best_model.zip", alone / "p.zip")
+    with pytest.raises(ValueError, match=r"p\.vecnormalize\.pkl is missing"):
+        make_policy(str(alone / "p.zip"))
+    code = main(["evaluate", "--policy", str(alone / "p.zip"), "--suite", str(tmp / "suite.yaml")])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1, err
+    assert str(alone / "p.vecnormalize.pkl") in err and "Traceback" not in err
+    code = main(["export-policy", str(alone / "p.zip"), "--onnx", str(tmp_path / "p.onnx")])
+    assert code == 2 and "p.vecnormalize.pkl is missing" in capsys.readouterr().err
+    shutil.copy(out / "best_model.vecnormalize.pkl", alone / "p.vecnormalize.pkl")
+    assert make_policy(str(alone / "p.zip")).normalisation() is not None
+
+
+def _with_metadata(src, dst, change):
+    shutil.copy(src, dst)
+    with zipfile.ZipFile(dst) as z:
+        meta = json.loads(z.read(META_NAME))
+    change(meta)
+    write_model_metadata(dst, meta)
+
+
+def test_normalisation_follows_the_metadata_and_older_models_keep_loading(ppo_run, tmp_path):
+    _, _, out = ppo_run
+    stats = out / "best_model.vecnormalize.pkl"
+    # trained without normalisation: a statistics file lying beside it is not applied
+    _with_metadata(out / "best_model.zip", tmp_path / "raw.zip",
+                   lambda m: m.update(obs_normalization=False))  # fmt: skip
+    shutil.copy(stats, tmp_path / "raw.vecnormalize.pkl")
+    assert make_policy(str(tmp_path / "raw.zip")).normalisation() is None
+    # written before the field existed, nothing beside it tells: as before, the statistics are
+    # used when found and the model loads without them
+    old = tmp_path / "old"
+    old.mkdir()
+    _with_metadata(out / "best_model.zip", old / "m.zip", lambda m: m.pop("obs_normalization"))
+    assert model_metadata(old / "m.zip")["obs_normalization"] is None
+    assert make_policy(str(old / "m.zip")).normalisation() is None
+    shutil.copy(stats, old / "m.vecnormalize.pkl")
+    assert make_policy(str(old / "m.zip")).normalisation() is not None
+    # ... but the config it was trained with, beside it (a shipped policy's STEM.yaml), tells
+    (old / "m.vecnormalize.pkl").unlink()
+    shutil.copy(out / "config.yaml", old / "m.yaml")
+    assert model_metadata(old / "m.zip")["obs_normalization"] is True
+    with pytest.raises(ValueError, match=r"m\.vecnormalize\.pkl is missing"):
+        make_policy(str(old / "m.zip"))

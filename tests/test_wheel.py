@@ -1,6 +1,13 @@
 """A non-editable install works: a wheel built from the project carries every config (the
-classical WSP's thresholds, suites, vehicles, training configs) and the shipped policies, and
-`wsp-env evaluate` runs from it, outside the source tree."""
+classical WSP's thresholds, suites, vehicles, training configs, the anti-skid device's), the
+shipped policies and the trace format, and every `wsp-env` command runs from it, outside the
+source tree.
+
+Two levels: the wheel unpacked onto ``PYTHONPATH`` of this interpreter (seconds), and the wheel
+installed by pip into fresh virtual environments, one without extras and one with
+``[rl,export]``, each running every subcommand once (marked ``wheel``: minutes; ``make test``
+runs it, ``pytest -m "not wheel"`` leaves it out).
+"""
 
 from __future__ import annotations
 
@@ -9,13 +16,16 @@ import os
 import shutil
 import subprocess
 import sys
+import time
 import zipfile
 from pathlib import Path
 
 import pytest
+from test_train import train_config
 
 ROOT = Path(__file__).resolve().parents[1]
-SOURCES = ("wsp_env", "baselines", "agents", "configs", "pyproject.toml", "README.md")
+SOURCES = ("wsp_env", "baselines", "agents", "configs", "docs", "pyproject.toml", "README.md")
+SHIPPED = sorted(p.stem for p in (ROOT / "agents" / "pretrained").glob("*.zip"))
 
 
 @pytest.fixture(scope="module")
@@ -56,9 +66,18 @@ def test_wheel_carries_configs_and_shipped_policies(installed):
                      "wsp_env/configs/vehicles/uic_z1.yaml", "wsp_env/configs/rails.yaml",
                      "wsp_env/baselines/classical.py"):  # fmt: skip
         assert required in names, required
+    for folder in ("train", "antiskid", "vehicles", "scenarios", "wsp"):
+        for cfg in (ROOT / "configs" / folder).glob("*.yaml"):
+            assert f"wsp_env/configs/{folder}/{cfg.name}" in names, cfg
     assert {n for n in names if n.startswith("wsp_env/configs/train/")}
     for shipped in (ROOT / "agents" / "pretrained").glob("*"):
         assert f"wsp_env/agents/pretrained/{shipped.name}" in names, shipped.name
+    # `wsp-env calibrate --help` names docs/trace_format.md: it is installed there, inside the
+    # package (wsp_env/docs/, copied from docs/ at build time), and nothing else of docs/ is
+    docs = {n for n in names if n.startswith("wsp_env/docs/")}
+    assert docs == {"wsp_env/docs/trace_format.md"}
+    text = zipfile.ZipFile(wheel).read("wsp_env/docs/trace_format.md")
+    assert text == (ROOT / "docs" / "trace_format.md").read_bytes()
 
 
 def test_evaluate_runs_from_the_wheel(installed):
@@ -76,3 +95,135 @@ def test_evaluate_runs_from_the_wheel(installed):
     assert done.returncode == 0, done.stderr[-2000:]
     runs = json.loads((tmp / "e.json").read_text())["runs"]
     assert {r["policy"] for r in runs} >= {"classical"} and all(r["stopped"] for r in runs)
+
+
+# ---- fresh installs ---------------------------------------------------------------------------
+
+# the installed commands see nothing of this checkout or of the test's own environment
+CLEAN = {k: v for k, v in os.environ.items()
+         if k not in ("PYTHONPATH", "PYTHONHOME", "VIRTUAL_ENV", "PYTHONSTARTUP")}  # fmt: skip
+TIMINGS: dict[str, float] = {}
+
+
+def _sh(cmd: list[str], cwd: Path, what: str) -> subprocess.CompletedProcess:
+    t0 = time.perf_counter()
+    done = subprocess.run(cmd, cwd=cwd, env=CLEAN, capture_output=True, text=True, check=False)
+    TIMINGS[f"{what} #{len(TIMINGS) + 1}"] = time.perf_counter() - t0
+    return done
+
+
+def _fresh_venv(tmp: Path, wheel: Path, name: str, extras: str = "") -> Path:
+    """A new virtual environment with the wheel installed by pip (dependencies resolved as a
+    user's install resolves them); the `rl` extra gets the CPU build of torch first, as the
+    Makefile installs it (a plain `torch` requirement would fetch a CUDA build)."""
+    venv = tmp / name
+    done = _sh([sys.executable, "-m", "venv", str(venv)], tmp, f"{name}: venv")
+    assert done.returncode == 0, done.stderr[-2000:]
+    pip = [str(venv / "bin" / "python"), "-m", "pip", "install", "--quiet"]
+    steps = (["torch==2.13.0"], [f"{wheel}{extras}"]) if extras else ([str(wheel)],)
+    for args in steps:
+        done = _sh(pip + args, tmp, f"{name}: pip install {Path(args[0]).name}")
+        assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
+    return venv
+
+
+class Installed:
+    def __init__(self, venv: Path, work: Path) -> None:
+        self.venv, self.work = venv, work
+        work.mkdir()
+
+    def run(self, *args: str) -> subprocess.CompletedProcess:
+        exe = str(self.venv / "bin" / "wsp-env")
+        return _sh([exe, *args], self.work, f"{self.venv.name}: {args[0]}")
+
+    def ok(self, *args: str) -> subprocess.CompletedProcess:
+        done = self.run(*args)
+        assert done.returncode == 0, f"{args}: {done.stderr[-3000:]}"
+        return done
+
+    def refused(self, *args: str) -> str:
+        """The one-line error of a command that needs an extra this install lacks."""
+        done = self.run(*args)
+        err = done.stderr.strip()
+        assert done.returncode == 2 and len(err.splitlines()) == 1, f"{args}: {done.stderr}"
+        assert "Traceback" not in err and "ModuleNotFoundError" not in err, err
+        return err
+
+    def read(self, name: str) -> dict:
+        return json.loads((self.work / name).read_text())
+
+
+@pytest.fixture(scope="module")
+def venvs(installed, tmp_path_factory):
+    """The two fresh installs (removed afterwards: together they take about 2 GB)."""
+    _, _, wheel = installed
+    tmp = tmp_path_factory.mktemp("venvs")
+    yield tmp, wheel
+    t0 = time.perf_counter()
+    shutil.rmtree(tmp, ignore_errors=True)
+    TIMINGS["rmtree"] = time.perf_counter() - t0
+    if TIMINGS:
+        sys.stderr.write("\nfresh-venv wheel test timings [s]: " + ", ".join(
+            f"{k} {v:.1f}" for k, v in TIMINGS.items()) + "\n")  # fmt: skip
+
+
+@pytest.mark.wheel
+def test_every_command_runs_from_a_fresh_install_without_extras(venvs):
+    tmp, wheel = venvs
+    site = Installed(_fresh_venv(tmp, wheel, "plain"), tmp / "plain_work")
+    py = str(site.venv / "bin" / "python")
+    where = subprocess.run([py, "-c", "import wsp_env; print(wsp_env.__file__)"], env=CLEAN,
+                           cwd=site.work, capture_output=True, text=True, check=True)  # fmt: skip
+    pkg = Path(where.stdout.strip()).parent
+    assert pkg.is_relative_to(site.venv), pkg  # the installed copy, not this checkout
+
+    site.ok("simulate", "--speed-kmh", "80", "--json", "sim.json", "--trace", "trace")
+    assert site.read("sim.json")["stopping_distance_m"] > 0
+    assert (site.work / "trace.csv").exists() and (site.work / "trace.meta.json").exists()
+    site.ok("evaluate", "--suite", "quick", "--policy", "classical", "--no-progress",
+            "--json", "eval.json")  # fmt: skip
+    assert {r["policy"] for r in site.read("eval.json")["runs"]} == {"classical"}
+    site.ok("calibrate", "trace.csv", "--json", "cal.json")
+    assert "errors_before" in site.read("cal.json")
+    # the trace format calibrate's help names is installed with the package
+    assert "docs/trace_format.md" in site.ok("calibrate", "--help").stdout
+    assert (pkg / "docs" / "trace_format.md").read_bytes() == (
+        ROOT / "docs" / "trace_format.md"
+    ).read_bytes()
+    site.ok("bench", "--quick", "--json", "bench.json")
+    assert site.read("bench.json")
+    site.ok("rig", "--speed-kmh", "60", "--json", "rig.json")
+    assert site.read("rig.json")["policy"] == "classical"
+    site.ok("traction", "--json", "traction.json")
+    assert site.read("traction.json")["distance_m"] > 0
+    site.ok("validate", "--json", "validate.json")  # exit 1 would be a failed fidelity check
+    assert site.read("validate.json")["passed"] is True
+
+    # without the rl and export extras: one line saying which extra to install
+    for cmd in (["simulate", "--policy", SHIPPED[0]],
+                ["evaluate", "--suite", "quick", "--policy", SHIPPED[0]]):  # fmt: skip
+        err = site.refused(*cmd)
+        assert f"{SHIPPED[0]}: learned policies need the rl extra" in err, err
+        assert "pip install 'wsp-env[rl]'" in err, err
+    cfg = train_config(tmp, n_timesteps=256)
+    err = site.refused("train", "--config", str(cfg), "--out", "run", "--no-progress")
+    assert "training needs the rl extra: pip install 'wsp-env[rl]'" in err, err
+    assert not (site.work / "run").exists()
+    err = site.refused("export-policy", SHIPPED[0], "--onnx", "p.onnx")
+    assert "pip install 'wsp-env[rl,export]'" in err, err
+
+
+@pytest.mark.wheel
+def test_learning_commands_run_from_a_fresh_install_with_rl_and_export(venvs):
+    tmp, wheel = venvs
+    site = Installed(_fresh_venv(tmp, wheel, "rl", "[rl,export]"), tmp / "rl_work")
+    site.ok("simulate", "--policy", SHIPPED[0], "--speed-kmh", "80", "--json", "sim.json")
+    assert site.read("sim.json")["policy"] == SHIPPED[0]
+    cfg = train_config(tmp, n_timesteps=256, checkpoint_every_timesteps=256)
+    site.ok("train", "--config", str(cfg), "--out", "run", "--no-progress", "--json", "train.json")
+    result = site.read("train.json")
+    assert result["total_timesteps"] == 256 and result["finished"]
+    assert (site.work / "run" / "model.zip").exists()
+    site.ok("export-policy", SHIPPED[0], "--onnx", "p.onnx", "--json", "export.json")
+    assert (site.work / "p.onnx").stat().st_size > 0
+    assert site.read("export.json")["latency_median_us"] > 0

@@ -354,7 +354,8 @@ def _add_calibrate(sub: argparse._SubParsersAction) -> None:
         description="Reads TRACE.csv (+ TRACE.meta.json next to it, wsp-trace/1), computes the "
         "train-speed balance, adhesion fit and coasting creep residuals, and adds the physical "
         "effects (BIC-scored) that explain them; --report writes a report with plots, --export "
-        "a rail table the environment loads. Format: docs/trace_format.md.",
+        "a rail table the environment loads. Format: docs/trace_format.md (installed as "
+        "wsp_env/docs/trace_format.md).",
     )
     p.add_argument("trace", help="the trace CSV (metadata found next to it)")
     p.add_argument("--json", dest="json_path", default=None, help="write the result here")

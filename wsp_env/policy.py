@@ -57,6 +57,13 @@ class SB3Policy:
     (``frame_stack`` in the run's config) get the stack built as ``VecFrameStack`` builds it
     (normalised frames, newest last, zeros at an episode's start); recurrent ones
     (RecurrentPPO) carry their LSTM state from step to step, reset with each episode.
+
+    The model file's metadata (``wsp_env.json``) says whether it was trained on normalised
+    observations (``obs_normalization``): such a model without its normalisation file is an
+    error (one line naming the file), and one trained without normalisation ignores any
+    statistics file lying about. Older models whose metadata does not say are told by their run's
+    config (``config.yaml`` of the run, or ``STEM.yaml`` beside a shipped policy), else the
+    statistics are used when found, as before.
     """
 
     privileged = False
@@ -66,6 +73,7 @@ class SB3Policy:
         if not p.exists():
             raise FileNotFoundError(f"{p}: no such policy file")
         meta = model_metadata(p)
+        require_extras(f"{p}: learned policies need", "rl")
         classes = _algo_classes()
         algo = meta["algo"]
         if algo not in classes:
@@ -74,9 +82,15 @@ class SB3Policy:
             model = classes[algo].load(p, device="cpu")
         except Exception as err:  # a damaged or foreign file: one line, not a traceback
             raise ValueError(f"{p}: cannot load as a {algo} model ({type(err).__name__})") from None
+        needs_norm = meta.get("obs_normalization")  # None: a model from before it was recorded
+        norm = None if needs_norm is False else _load_normalisation(p)
+        if needs_norm and norm is None:
+            raise ValueError(
+                f"{p}: trained on normalised observations, but its normalisation file "
+                f"{p.with_suffix('.vecnormalize.pkl')} is missing (copy it beside the model)"
+            )
         self.vehicle = meta.get("vehicle")
-        self._setup(model, _load_normalisation(p), meta["env_kwargs"], meta["name"],
-                    int(meta["frame_stack"]))  # fmt: skip
+        self._setup(model, norm, meta["env_kwargs"], meta["name"], int(meta["frame_stack"]))
 
     @classmethod
     def from_model(
@@ -180,6 +194,39 @@ POLICY_ENV_KWARGS = (
 
 META_NAME = "wsp_env.json"  # the metadata entry ``wsp-env train`` adds to every model file
 
+# the optional dependency groups (pyproject.toml) and the modules that tell they are installed
+EXTRAS = {"rl": ("torch", "stable_baselines3"), "export": ("onnx", "onnxruntime")}
+
+
+class MissingExtraError(ValueError):
+    """An optional dependency group of the package is not installed (one line saying which)."""
+
+
+def require_extras(needs: str, *extras: str) -> None:
+    """Raise ``MissingExtraError`` unless every module of ``extras`` (``EXTRAS``) imports:
+    ``f"{needs} the rl extra: pip install 'wsp-env[rl]' (no module named 'torch')"``."""
+    import importlib
+
+    for extra in extras:
+        for module in EXTRAS[extra]:
+            try:
+                importlib.import_module(module)
+            except ImportError as err:
+                word = "extra" if len(extras) == 1 else "extras"
+                raise MissingExtraError(
+                    f"{needs} the {' and '.join(extras)} {word}: pip install "
+                    f"'wsp-env[{','.join(extras)}]' (no module named {err.name or module!r})"
+                ) from None
+
+
+def obs_normalization(config: dict[str, Any]) -> bool:
+    """Whether a training config (``config.yaml``'s content) normalises observations:
+    ``normalize`` true, or a mapping without ``norm_obs: false``."""
+    norm = config.get("normalize")
+    if isinstance(norm, dict):
+        return bool(norm.get("norm_obs", True))
+    return bool(norm)
+
 
 def _algo_classes() -> dict[str, type]:
     import stable_baselines3 as sb3
@@ -205,13 +252,20 @@ def policy_metadata(config: dict[str, Any], name: str) -> dict[str, Any]:
             vehicle = load_vehicle(vehicle).id
         except (ConfigError, OSError):
             pass
+    # the sensor tier is written out even where the config leaves it to the defaults
+    sensors = {"privileged": False, "accelerometer": False}
     return {
         "format": "wsp-env-policy/1",
         "name": name,
         "algo": config["algo"],
         "vehicle": vehicle if isinstance(vehicle, str) else None,
         "frame_stack": int(config.get("frame_stack", 1) or 1),
-        "env_kwargs": {k: env_kwargs[k] for k in POLICY_ENV_KWARGS if k in env_kwargs},
+        # True: the model needs its STEM.vecnormalize.pkl (SB3Policy refuses it without)
+        "obs_normalization": obs_normalization(config),
+        "env_kwargs": {
+            **sensors,
+            **{k: env_kwargs[k] for k in POLICY_ENV_KWARGS if k in env_kwargs},
+        },
     }
 
 
@@ -233,7 +287,10 @@ def write_model_metadata(model_path: str | Path, meta: dict[str, Any]) -> None:
 
 def model_metadata(model_path: Path) -> dict[str, Any]:
     """The algorithm and environment settings of a model file: its own metadata entry, else the
-    ``config.yaml`` of the training run it sits in. Neither: one line saying so."""
+    ``config.yaml`` of the training run it sits in. Neither: one line saying so.
+
+    ``obs_normalization`` is True, False, or None where nothing tells (an entry written before
+    the field existed, with no run config beside it to read it from)."""
     import json
     import zipfile
 
@@ -245,6 +302,10 @@ def model_metadata(model_path: Path) -> dict[str, Any]:
                     meta.setdefault("name", model_path.stem)
                     meta.setdefault("frame_stack", 1)
                     meta.setdefault("env_kwargs", {})
+                    if "obs_normalization" not in meta:  # written before the field existed
+                        config = _run_config(model_path)
+                        known = config is not None and "algo" in config
+                        meta["obs_normalization"] = obs_normalization(config) if known else None
                     return meta
     except zipfile.BadZipFile:
         raise ValueError(f"{model_path}: not a model file (not a zip archive)") from None
@@ -260,14 +321,19 @@ def model_metadata(model_path: Path) -> dict[str, Any]:
 
 def _run_config(model_path: Path) -> dict[str, Any] | None:
     """The ``config.yaml`` of the training run a model file belongs to (its folder, or the run
-    folder above a checkpoint), or None."""
+    folder above a checkpoint), else a shipped policy's ``STEM.yaml`` beside it (the config it
+    was trained with), or None."""
     import yaml
 
-    for folder in model_path.parents[:4]:
-        cfg = folder / "config.yaml"
+    beside = model_path.with_suffix(".yaml")
+    for cfg in [folder / "config.yaml" for folder in model_path.parents[:4]] + [beside]:
         if cfg.exists():
-            data = yaml.safe_load(cfg.read_text())
-            return data if isinstance(data, dict) else None
+            try:
+                data = yaml.safe_load(cfg.read_text())
+            except yaml.YAMLError:
+                data = None
+            if cfg != beside or (isinstance(data, dict) and "algo" in data):
+                return data if isinstance(data, dict) else None
     return None
 
 
@@ -318,6 +384,7 @@ def make_policy(name_or_path: str, wsp_config: str | None = None) -> Any:
     if path.suffix == ".zip" or path.exists():
         return SB3Policy(path)
     if name_or_path in shipped_policies():
+        require_extras(f"{name_or_path}: learned policies need", "rl")
         return SB3Policy(pretrained_dir() / f"{name_or_path}.zip")
     names = ", ".join(["classical", "none", "oracle", *shipped_policies()])
     raise ValueError(

@@ -70,9 +70,11 @@ def _actor_module(policy: SB3Policy) -> Any:
 def export_onnx(model_path: str | Path, out_path: str | Path) -> dict[str, Any]:
     """Write ``out_path`` (ONNX); return what was written and the measured per-decision
     latency of ONNX Runtime on this machine (one observation, median of 2,000 calls)."""
-    import torch
+    from wsp_env.policy import make_policy, require_extras
 
-    from wsp_env.policy import make_policy
+    # torch and SB3 load the model, onnx writes the graph, onnxruntime times it
+    require_extras(f"{model_path}: ONNX export needs", "rl", "export")
+    import torch
 
     policy = make_policy(str(model_path))  # a model file or a shipped policy's name
     if not isinstance(policy, SB3Policy):

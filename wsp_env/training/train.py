@@ -338,6 +338,9 @@ def train(
     after about this many steps (at the next rollout boundary) with a checkpoint, to go on
     with ``resume``: chunks resumed in turn give the run trained in one go, bit for bit.
     """
+    from wsp_env.policy import require_extras
+
+    require_extras("training needs", "rl")  # one line, before the config (its checks use SB3)
     import torch
     from stable_baselines3.common.logger import configure
     from stable_baselines3.common.vec_env import VecNormalize
@@ -433,7 +436,7 @@ def train(
         final = validator.evaluate(model)
         save_policy_files(model, out / "model", cfg)
         _save_checkpoint(model, cfg, out / "checkpoints" / f"step_{model.num_timesteps}")
-        _merge_progress(out)
+        merge_progress(out)
         result = {
             "model_path": str(out / "best_model.zip"),
             "final_model_path": str(out / "model.zip"),
@@ -466,8 +469,14 @@ def train(
         raise
 
 
-def _merge_progress(out: Path) -> None:
-    """``progress.csv``: the CSV logs of every call of the run (``logs/from_step_N``), in order."""
+def merge_progress(out: Path) -> None:
+    """``progress.csv``: the CSV logs of every call of the run (``logs/from_step_N``) as one
+    row per timestep (``time/total_timesteps``), in order.
+
+    A call that resumed from the checkpoint at step N discarded what earlier calls did after N
+    (a run killed after its last checkpoint and resumed logs those steps again): its rows
+    replace every earlier call's rows past N, and at any timestep logged twice the later call's
+    row wins. A row without a timestep stays after the row logged before it in its file."""
     import csv
 
     parts = sorted(
@@ -475,13 +484,22 @@ def _merge_progress(out: Path) -> None:
         for p in (out / "logs").glob("from_step_*")
         if (p / "progress.csv").exists() and p.name.rsplit("_", 1)[1].isdigit()
     )
-    rows: list[dict[str, str]] = []
+    by_step: dict[int, list[dict[str, str]]] = {}  # timestep -> its row and any untimed after it
     names: dict[str, None] = {}
-    for _, path in parts:
+    for start, path in parts:  # in the order the calls ran (each resumes the latest checkpoint)
+        by_step = {n: rows for n, rows in by_step.items() if n <= start}
         with path.open(newline="") as fh:
             reader = csv.DictReader(fh)
             names.update(dict.fromkeys(reader.fieldnames or ()))
-            rows.extend(reader)
+            last = start
+            for row in reader:
+                n = _timestep(row.get("time/total_timesteps"))
+                if n is None:  # no timestep: kept with the row before it
+                    by_step.setdefault(last, []).append(row)
+                else:
+                    by_step[n] = [row]  # the later row at a timestep replaces the earlier
+                    last = n
+    rows = [row for n in sorted(by_step) for row in by_step[n]]
     from wsp_env.files import write_atomically
 
     def write(fh: Any) -> None:
@@ -490,6 +508,13 @@ def _merge_progress(out: Path) -> None:
         w.writerows(rows)
 
     write_atomically(out / "progress.csv", write)
+
+
+def _timestep(text: str | None) -> int | None:
+    try:
+        return int(float(text))  # type: ignore[arg-type]
+    except (TypeError, ValueError, OverflowError):
+        return None
 
 
 def _have_tensorboard() -> bool:
@@ -506,6 +531,7 @@ __all__ = [
     "Validator",
     "latest_checkpoint",
     "load_train_config",
+    "merge_progress",
     "parse_train_config",
     "save_policy_files",
     "train",
