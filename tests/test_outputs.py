@@ -111,3 +111,38 @@ def test_report_folders_get_the_usual_mode(tmp_path):
     finally:
         os.umask(old)
     assert stat.S_IMODE((tmp_path / "rep").stat().st_mode) == 0o755
+
+
+def test_a_producers_error_names_the_output_not_its_temp(tmp_path, monkeypatch, capsys):
+    import wsp_env.evaluation.plotting as plotting
+
+    def full(record, path, title=""):
+        raise OSError(f"[Errno 28] No space left on device: '{path}'")
+
+    monkeypatch.setattr(plotting, "plot_run", full)
+    assert main(["simulate", "--speed-kmh", "30", "--plot", str(tmp_path / "p.png")]) == 2
+    err = capsys.readouterr().err.splitlines()[-1]
+    assert str(tmp_path / "p.png") in err and ".wsp-" not in err
+
+
+def test_a_killed_reports_build_folder_is_cleared_too(tmp_path):
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
+                          capture_output=True, text=True, check=True).stdout.strip()  # fmt: skip
+    build = tmp_path / f"..wsp-{dead}-abcdef.rep.k2j3h4"  # replace_dir_atomically's own temp
+    build.mkdir()
+    (build / "report.md").write_text("half")
+    with Outputs() as out:
+        out.reserve(tmp_path / "rep", "--report", "dir")
+        out.commit()
+    assert not build.exists()
+
+
+def test_a_closed_stdout_ends_quietly(tmp_path):
+    """``wsp-env simulate | head -1``: the reader went away; no traceback, SIGPIPE's status."""
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "wsp_env.cli", "simulate", "--speed-kmh", "20"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=tmp_path,
+    )  # fmt: skip
+    proc.stdout.close()  # before the command prints anything
+    _, err = proc.communicate(timeout=300)
+    assert proc.returncode == 141 and b"Traceback" not in err

@@ -842,7 +842,8 @@ def main(argv: list[str] | None = None) -> int:
                 write_json(json_tmp, result)
             outputs.commit()
     except (ConfigError, UserError, ValueError, OSError) as err:
-        print(f"wsp-env {args.command}: error: {err}", file=sys.stderr)
+        message = outputs.explain(str(err))  # a producer's error names the output, not its temp
+        print(f"wsp-env {args.command}: error: {message}", file=sys.stderr)
         return 2
     try:
         PRINTERS[args.command](result)

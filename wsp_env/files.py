@@ -162,8 +162,9 @@ def remove_stale_temps(folder: Path, name: str) -> None:
     (its temp names carry its process id; a living process's are left alone)."""
     if not folder.is_dir():
         return
-    for p in folder.glob(f"{_TEMP_PREFIX}*.{name}*"):
-        pid = p.name[len(_TEMP_PREFIX) :].split("-", 1)[0]
+    # ours, and a report folder's own build folder beside it (``.`` + our name + ``.XXXX``)
+    for p in [*folder.glob(f"{_TEMP_PREFIX}*.{name}*"), *folder.glob(f".{_TEMP_PREFIX}*.{name}*")]:
+        pid = p.name.lstrip(".")[len(_TEMP_PREFIX) - 1 :].split("-", 1)[0]
         if pid.isdigit() and int(pid) != os.getpid() and not _alive(int(pid)):
             _remove(p)
 
@@ -239,6 +240,12 @@ class Outputs:
                 raise OutputError(f"{option}: cannot create {p} ({err.strerror})") from None
             self._created.append(p)
 
+    def explain(self, message: str) -> str:
+        """``message`` with every temp path of this command's outputs named as the output."""
+        for final, temp, _ in self._items:
+            message = message.replace(str(temp), str(final)).replace(temp.name, final.name)
+        return message
+
     def _written(self, temp: Path) -> list[Path]:
         """Everything a producer wrote for ``temp``: the path itself and ``temp + suffix``."""
         return sorted(temp.parent.glob(f"{temp.name}*"))
@@ -267,5 +274,4 @@ class Outputs:
         for folder in reversed(self._created):
             with contextlib.suppress(OSError):
                 folder.rmdir()  # only if empty
-        self._items.clear()
-        self._created.clear()
+        self._created.clear()  # the items stay: ``explain`` still names them
