@@ -104,13 +104,15 @@ def test_the_cli_writes_no_output_when_one_producer_fails(tmp_path, monkeypatch,
     assert list(tmp_path.iterdir()) == []
 
 
-def test_report_folders_get_the_usual_mode(tmp_path):
-    old = os.umask(0o022)
+@pytest.mark.parametrize("mask", [0o022, 0o077])
+def test_report_folders_get_the_usual_mode(tmp_path, mask):
+    """The umask at the time of writing, not at import (mkdtemp alone would make 0700)."""
+    old = os.umask(mask)
     try:
         replace_dir_atomically(tmp_path / "rep", lambda d: (d / "report.md").write_text("x"))
     finally:
         os.umask(old)
-    assert stat.S_IMODE((tmp_path / "rep").stat().st_mode) == 0o755
+    assert stat.S_IMODE((tmp_path / "rep").stat().st_mode) == 0o777 & ~mask
 
 
 def test_a_producers_error_names_the_output_not_its_temp(tmp_path, monkeypatch, capsys):
@@ -146,3 +148,74 @@ def test_a_closed_stdout_ends_quietly(tmp_path):
     proc.stdout.close()  # before the command prints anything
     _, err = proc.communicate(timeout=300)
     assert proc.returncode == 141 and b"Traceback" not in err
+
+
+def _simulate(tmp_path, *args):
+    return main(["simulate", "--speed-kmh", "20", *(str(a) for a in args)])
+
+
+def test_odd_names_are_written_and_leave_no_temp(tmp_path):
+    """Names with glob characters (``[``, ``*``) are names like any other."""
+    assert _simulate(tmp_path, "--json", tmp_path / "o[1]*.json") == 0
+    assert [p.name for p in tmp_path.iterdir()] == ["o[1]*.json"]
+
+
+def test_a_trace_stem_with_a_csv_in_its_name(tmp_path):
+    assert _simulate(tmp_path, "--trace", tmp_path / "a.csv.csv") == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.csv.csv", "a.csv.meta.json"]
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (("--trace", "run", "--json", "run.csv"), "also another output"),
+        (("--trace", "x", "--plot", "x.meta.json"), "also another output"),
+        (("--json", "sub/"), "is not a file name"),
+        (("--json", "/dev/null"), "not a regular file"),
+    ],
+)
+def test_outputs_that_would_overwrite_each_other_are_refused(tmp_path, capsys, args, message):
+    os.chdir(tmp_path)
+    assert _simulate(tmp_path, *args) == 2
+    assert message in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_an_output_inside_a_report_folder_is_refused(tmp_path, capsys):
+    rep = tmp_path / "rep"
+    code = main(["evaluate", "--policy", "none", "--suite", "quick", "--no-progress",
+                 "--report", str(rep), "--json", str(rep / "r.json")])  # fmt: skip
+    assert code == 2 and "inside one another" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_an_output_on_an_input_is_refused(tmp_path, capsys):
+    assert _simulate(tmp_path, "--trace", tmp_path / "t") == 0
+    before = (tmp_path / "t.meta.json").read_bytes()
+    code = main(["calibrate", str(tmp_path / "t.csv"), "--json", str(tmp_path / "t.meta.json")])
+    assert code == 2 and "one of this command's inputs" in capsys.readouterr().err
+    assert (tmp_path / "t.meta.json").read_bytes() == before
+
+
+def test_the_exported_table_names_its_options_file(tmp_path):
+    assert _simulate(tmp_path, "--trace", tmp_path / "t", "--policy", "classical") == 0
+    assert main(["calibrate", str(tmp_path / "t.csv"), "--export", str(tmp_path / "cal.yaml")]) == 0
+    header = (tmp_path / "cal.yaml").read_text().splitlines()[:3]
+    assert any("Scenario options: cal.yaml.options.yaml" in line for line in header)
+    assert (tmp_path / "cal.yaml.options.yaml").exists()
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
+
+
+def test_a_report_is_replaced_whole(tmp_path):
+    rep = tmp_path / "rep"
+    rep.mkdir()
+    (rep / "report.md").write_text("old")
+    (rep / "old_plot.png").write_text("old")
+    with Outputs() as out:
+        replace_dir_atomically(
+            out.reserve(rep, "--report", "dir"), lambda d: (d / "report.md").write_text("new")
+        )
+        out.commit()
+    assert [p.name for p in rep.iterdir()] == ["report.md"]
+    assert (rep / "report.md").read_text() == "new"
+    assert [p.name for p in tmp_path.iterdir()] == ["rep"]

@@ -45,12 +45,10 @@ def finite(obj: Any) -> Any:
 
 
 def _current_umask() -> int:
+    """The process's umask now (read when a file is made: a caller may change it)."""
     mask = os.umask(0)
     os.umask(mask)
     return mask
-
-
-_UMASK = _current_umask()
 
 
 def write_temp(target: Path, write: Writer, binary: bool = False) -> Path:
@@ -60,7 +58,7 @@ def write_temp(target: Path, write: Writer, binary: bool = False) -> Path:
     """
     fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
     tmp_path = Path(tmp)
-    os.chmod(tmp_path, 0o666 & ~_UMASK)  # mkstemp makes 0600; outputs get the usual mode
+    os.chmod(tmp_path, 0o666 & ~_current_umask())  # mkstemp makes 0600; outputs get the usual mode
     try:
         fh_ctx = os.fdopen(fd, "wb") if binary else os.fdopen(fd, "w", encoding="utf-8", newline="")
         with fh_ctx as fh:
@@ -116,7 +114,7 @@ def replace_dir_atomically(target: str | Path, build: Callable[[Path], None]) ->
     tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent))
     try:
         build(tmp)
-        os.chmod(tmp, 0o777 & ~_UMASK)  # mkdtemp makes 0700; a report gets the usual mode
+        os.chmod(tmp, 0o777 & ~_current_umask())  # mkdtemp makes 0700; a report gets the usual mode
         if target.exists():
             shutil.rmtree(target)
         os.replace(tmp, target)
@@ -157,20 +155,35 @@ def _remove(path: Path) -> None:
             path.unlink()
 
 
+def _starting(folder: Path, prefix: str) -> list[Path]:
+    """The entries of ``folder`` whose names start with ``prefix`` (no glob: names may hold
+    ``[`` or ``*``)."""
+    try:
+        return sorted(folder / n for n in os.listdir(folder) if n.startswith(prefix))
+    except OSError:
+        return []
+
+
 def remove_stale_temps(folder: Path, name: str) -> None:
     """Remove what an earlier, killed command left of its outputs for ``name`` in ``folder``
-    (its temp names carry its process id; a living process's are left alone)."""
+    (its temp names carry its process id; a living process's are left alone; a report's build
+    folder is the temp name with one more leading dot)."""
     if not folder.is_dir():
         return
-    # ours, and a report folder's own build folder beside it (``.`` + our name + ``.XXXX``)
-    for p in [*folder.glob(f"{_TEMP_PREFIX}*.{name}*"), *folder.glob(f".{_TEMP_PREFIX}*.{name}*")]:
-        pid = p.name.lstrip(".")[len(_TEMP_PREFIX) - 1 :].split("-", 1)[0]
+    for n in os.listdir(folder):
+        bare = n.lstrip(".")
+        if not n.startswith((_TEMP_PREFIX, "." + _TEMP_PREFIX)) or f".{name}" not in bare:
+            continue
+        pid = bare[len(_TEMP_PREFIX) - 1 :].split("-", 1)[0]
         if pid.isdigit() and int(pid) != os.getpid() and not _alive(int(pid)):
-            _remove(p)
+            _remove(folder / n)
 
 
 class OutputError(ValueError):
     """An output path that cannot be written (one line naming the option and the path)."""
+
+
+SUFFIXES = {"file": ("",), "dir": ("",), "stem": (".csv", ".meta.json")}
 
 
 class Outputs:
@@ -178,14 +191,17 @@ class Outputs:
     work; producers write to the temp sibling :meth:`reserve` returns (same folder, so the
     final move is an atomic rename); :meth:`commit` moves them all into place at the end, and
     on failure :meth:`abort` removes them, with any folder created for them: all of a
-    command's outputs or none. A producer may write further files named after the temp path
-    (``TEMP.csv`` and ``TEMP.meta.json`` for a trace stem ``TEMP``): they move with it.
-    Use as a context manager: leaving it by an exception aborts.
+    command's outputs or none. An output may be several files named by suffixing one path
+    (``kind="stem"``: ``STEM.csv`` and ``STEM.meta.json``; ``suffixes`` for others): each is
+    checked, and each moves with it. Paths the command reads (:meth:`inputs`) are never
+    outputs. Use as a context manager: leaving it by an exception aborts.
     """
 
     def __init__(self) -> None:
-        self._items: list[tuple[Path, Path, str]] = []  # (final, temp, kind)
+        # (final, temp, kind, suffixes): temp + suffix becomes final + suffix at the commit
+        self._items: list[tuple[Path, Path, str, tuple[str, ...]]] = []
         self._created: list[Path] = []
+        self._inputs: set[Path] = set()
         self._token = f"{os.getpid()}-{os.urandom(3).hex()}"
 
     def __enter__(self) -> Outputs:
@@ -195,31 +211,57 @@ class Outputs:
         if exc_type is not None:
             self.abort()
 
-    def reserve(self, path: str | Path, option: str, kind: str = "file") -> Path:
-        """Check that ``path`` (given by ``option``) can be written as a ``kind`` (``file``,
-        ``stem``: files named by suffixing it, or ``dir``: a report folder); return the temp
-        path to write instead."""
+    def inputs(self, *paths: str | Path | None) -> None:
+        """Files the command reads: an output on one of them is refused."""
+        self._inputs.update(Path(p).resolve() for p in paths if p is not None)
+
+    def _finals(self) -> list[tuple[Path, str]]:
+        return [(f.with_name(f.name + x), k) for f, _, k, xs in self._items for x in xs]
+
+    def reserve(
+        self, path: str | Path, option: str, kind: str = "file", suffixes: tuple[str, ...] = ()
+    ) -> Path:
+        """Check that ``path`` (given by ``option``) can be written as a ``kind`` (``file``;
+        ``stem``: files named by suffixing it; ``dir``: a report folder) with ``suffixes`` (the
+        further files a producer names after it); return the temp path to write instead."""
+        text = str(path)
         final = Path(path)
-        if not str(path) or final.name in ("", ".", ".."):
-            raise OutputError(f"{option}: {str(path)!r} is not a file name")
-        resolved = final.resolve()
-        for other, _, _ in self._items:
-            if other.resolve() == resolved:
-                raise OutputError(f"{option}: {final} is also another output of this command")
-        if kind == "dir":
-            if final.exists() and not final.is_dir():
-                raise OutputError(f"{option}: {final} exists and is not a folder")
-            if final.is_dir() and any(final.iterdir()) and not (final / "report.md").exists():
-                raise OutputError(
-                    f"{option}: {final} exists and is not a wsp-env report folder; not overwriting"
-                )
-        elif final.is_dir():
-            raise OutputError(f"{option}: {final} is a folder")
+        if not text or final.name in ("", ".", "..") or text.endswith(os.sep):
+            raise OutputError(f"{option}: {text!r} is not a file name")
+        suffixes = SUFFIXES[kind] + tuple(suffixes)
+        taken = self._finals()
+        for x in suffixes:
+            self._check_target(final.with_name(final.name + x), option, kind, taken)
         self._make_parent(final.parent, option)
         remove_stale_temps(final.parent, final.name)
-        temp = final.with_name(f"{_TEMP_PREFIX}{self._token}.{final.name}")
-        self._items.append((final, temp, kind))
+        end = "~" if kind == "stem" else ""  # a trace writer must not read a suffix into it
+        temp = final.with_name(f"{_TEMP_PREFIX}{self._token}.{final.name}{end}")
+        self._items.append((final, temp, kind, suffixes))
         return temp
+
+    def _check_target(self, target: Path, option: str, kind: str, taken: list) -> None:
+        resolved = target.resolve()
+        if resolved in self._inputs:
+            raise OutputError(f"{option}: {target} is one of this command's inputs")
+        for other, other_kind in taken:
+            o = other.resolve()
+            if o == resolved:
+                raise OutputError(f"{option}: {target} is also another output of this command")
+            if (other_kind == "dir" and o in resolved.parents) or (
+                kind == "dir" and resolved in o.parents
+            ):
+                raise OutputError(f"{option}: {target} and {other} are inside one another")
+        if kind == "dir":
+            if target.is_symlink() or (target.exists() and not target.is_dir()):
+                raise OutputError(f"{option}: {target} exists and is not a folder")
+            if target.is_dir() and any(target.iterdir()) and not (target / "report.md").exists():
+                raise OutputError(
+                    f"{option}: {target} exists and is not a wsp-env report folder; not overwriting"
+                )
+        elif target.is_dir():
+            raise OutputError(f"{option}: {target} is a folder")
+        elif target.exists() and not target.is_file():
+            raise OutputError(f"{option}: {target} exists and is not a regular file")
 
     def _make_parent(self, folder: Path, option: str) -> None:
         missing = []
@@ -242,34 +284,44 @@ class Outputs:
 
     def explain(self, message: str) -> str:
         """``message`` with every temp path of this command's outputs named as the output."""
-        for final, temp, _ in self._items:
+        for final, temp, _, _ in self._items:
             message = message.replace(str(temp), str(final)).replace(temp.name, final.name)
         return message
 
-    def _written(self, temp: Path) -> list[Path]:
-        """Everything a producer wrote for ``temp``: the path itself and ``temp + suffix``."""
-        return sorted(temp.parent.glob(f"{temp.name}*"))
-
     def commit(self) -> list[Path]:
-        """Move every written output into place; return the final paths."""
+        """Move every written output into place (folders first, so that an output is never
+        inside a folder being replaced); return the final paths. Every target is checked again
+        first; an old report folder is set aside and removed only after its successor is in."""
+        moves = []
+        for final, temp, kind, suffixes in self._items:
+            for x in suffixes:
+                written = temp.with_name(temp.name + x)
+                if written.exists():
+                    moves.append((kind, written, final.with_name(final.name + x)))
+        moves.sort(key=lambda m: m[0] != "dir")
+        for kind, _, target in moves:
+            if kind != "dir" and target.is_dir():
+                raise OutputError(f"{target}: became a folder while the command ran")
         done: list[Path] = []
-        for final, temp, kind in self._items:
-            for written in self._written(temp):
-                target = final.with_name(final.name + written.name[len(temp.name) :])
-                if kind == "dir" and target.is_dir():
-                    shutil.rmtree(target)
-                os.replace(written, target)
-                done.append(target)
+        for kind, written, target in moves:
+            old = None
+            if kind == "dir" and (target.exists() or target.is_symlink()):
+                old = target.with_name(f"{_TEMP_PREFIX}{self._token}.old.{target.name}")
+                os.replace(target, old)
+            os.replace(written, target)
+            if old is not None:
+                _remove(old)
+            done.append(target)
         self._items.clear()
         self._created.clear()
         return done
 
     def abort(self) -> None:
         """Remove every temp output and every folder created for them."""
-        for _, temp, _ in self._items:
-            for written in self._written(temp):
+        for _, temp, _, _ in self._items:
+            for written in _starting(temp.parent, temp.name):
                 _remove(written)
-            for stray in temp.parent.glob(f".{temp.name}.*"):  # a report folder's own temp
+            for stray in _starting(temp.parent, "." + temp.name):  # a report's build folder
                 _remove(stray)
         for folder in reversed(self._created):
             with contextlib.suppress(OSError):

@@ -63,8 +63,11 @@ def scenario_options(result: Result) -> dict[str, Any]:
     return opts
 
 
-def export_config(path: str | Path, trace: Trace, result: Result) -> tuple[Path, Path]:
-    """Write ``PATH`` (rail table) and ``PATH.options.yaml`` (reset options).
+def export_config(
+    path: str | Path, trace: Trace, result: Result, name: str | None = None
+) -> tuple[Path, Path]:
+    """Write ``PATH`` (rail table) and ``PATH.options.yaml`` (reset options); ``name``: the
+    table's file name as its header names it (default: ``PATH``'s; a temp path's final name).
 
     The rail is the calibrated adhesion law (``Result.adhesion_law``: the pooled Eq. 9 fit, with
     the last adhesion effect's joint refit) as a ``polach_simple`` rail, its level that of the
@@ -102,7 +105,7 @@ def export_config(path: str | Path, trace: Trace, result: Result) -> tuple[Path,
     header = (
         f"# Calibrated from {trace.path} by wsp-env calibrate (seed 000 Eq. 9 fitted to all\n"
         f"# axles' critical points{', with recovery' if 'recovery' in rail['calibrated'] else ''}"
-        f"). Scenario options: {target.name}.options.yaml\n"
+        f"). Scenario options: {name or target.name}.options.yaml\n"
     )
     text = header + yaml.safe_dump(rail, sort_keys=False)
     opts_path = target.with_name(target.name + ".options.yaml")

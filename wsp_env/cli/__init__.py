@@ -85,10 +85,16 @@ def _seed(text: str) -> int:
     return v
 
 
-def _reserve(args: argparse.Namespace, attr: str, option: str, kind: str = "file") -> Path | None:
+def _reserve(
+    args: argparse.Namespace, attr: str, option: str, kind: str = "file", suffixes: tuple = ()
+) -> Path | None:
     """The temp path to write ``args.<attr>``'s output to, checked now (``files.Outputs``)."""
     path = getattr(args, attr)
-    return None if path is None else args.outputs.reserve(path, option, kind)
+    return None if path is None else args.outputs.reserve(path, option, kind, suffixes)
+
+
+# the arguments that name outputs; any other argument naming an existing file is an input
+OUTPUT_ARGS = ("json_path", "plot", "trace", "report", "export", "onnx", "out", "resume")
 
 
 def _nonneg(text: str) -> float:
@@ -99,6 +105,13 @@ def _nonneg(text: str) -> float:
     if not (np.isfinite(v) and v >= 0):
         raise argparse.ArgumentTypeError(f"must be >= 0, got {text!r}")
     return v
+
+
+def _meta_of(csv_path: str) -> str:
+    """A trace's metadata file (``NAME.meta.json`` beside ``NAME.csv``)."""
+    p = Path(csv_path)
+    name = p.name[: -len(".csv")] if p.name.endswith(".csv") else p.stem
+    return str(p.with_name(f"{name}.meta.json"))
 
 
 def _option(name: str) -> Any:
@@ -324,7 +337,7 @@ def _add_calibrate(sub: argparse._SubParsersAction) -> None:
         "a rail table the environment loads. Format: docs/trace_format.md (installed as "
         "wsp_env/docs/trace_format.md).",
     )
-    p.add_argument("trace", help="the trace CSV (metadata found next to it)")
+    p.add_argument("trace_csv", metavar="trace", help="the trace CSV (metadata found next to it)")
     p.add_argument("--json", dest="json_path", default=None, help="write the result here")
     p.add_argument("--report", default=None, help="write report.md and plots into this folder")
     p.add_argument(
@@ -337,15 +350,15 @@ def cmd_calibrate(args: argparse.Namespace) -> dict[str, Any]:
     from wsp_env.calibration.discovery import discover
     from wsp_env.calibration.traces import TraceError, read_trace
 
-    export_tmp = _reserve(args, "export", "--export")
+    export_tmp = _reserve(args, "export", "--export", suffixes=(".options.yaml",))
     report_tmp = _reserve(args, "report", "--report", "dir")
     try:
-        trace = read_trace(args.trace)
+        trace = read_trace(args.trace_csv)
     except TraceError as err:
         raise UserError(str(err)) from None
     result = discover(trace)
     payload = {
-        "trace": str(args.trace),
+        "trace": str(args.trace_csv),
         "errors_before": result.errors_before,
         "errors_after": result.errors_after,
         "added_effects": [s.as_dict() for s in result.added],
@@ -361,7 +374,7 @@ def cmd_calibrate(args: argparse.Namespace) -> dict[str, Any]:
     from wsp_env.calibration.export import export_config, write_report
 
     if export_tmp is not None:
-        export_config(export_tmp, trace, result)
+        export_config(export_tmp, trace, result, name=Path(args.export).name)
         payload["outputs"].extend([args.export, f"{args.export}.options.yaml"])
     if report_tmp is not None:
         write_report(report_tmp, trace, result)
@@ -656,6 +669,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         with Outputs() as outputs:  # every output checked first, all written at the end or none
             args.outputs = outputs
+            read = [v for k, v in vars(args).items() if k not in OUTPUT_ARGS
+                    and isinstance(v, str) and Path(v).is_file()]  # fmt: skip
+            outputs.inputs(*read, *(_meta_of(v) for v in read if v.endswith(".csv")))
             json_tmp = _reserve(args, "json_path", "--json") if "json_path" in args else None
             result = args.func(args)
             if json_tmp is not None:
