@@ -5,8 +5,12 @@ leftover files.
 
     .venv/bin/python scripts/bad_inputs.py [--markdown docs/results/bad_inputs.md]
 
-Cases run in-process (``wsp_env.cli.main``) in a fresh folder each, with a 60 s alarm for
-hangs; the environment's cases call ``gymnasium.make`` / ``reset`` / ``step`` directly.
+Cases run in-process (``wsp_env.cli.main``) in a fresh copy of the fixture folder each: a file
+added, removed or rewritten there by a failed command counts as left behind. A 60 s alarm
+catches a hang in Python code; it cannot interrupt a compiled loop, so the inputs that made one
+(a 1e-12 s substep, a 1e9 s traction test) must be refused before any compiled code runs, and
+are. The environment's cases call ``gymnasium.make`` / ``reset`` / ``step`` directly and must
+raise ``ValueError`` or ``RuntimeError`` with one line that starts with or names the field.
 ``tests/test_bad_inputs.py`` runs every case and requires every one clean.
 """
 
@@ -74,6 +78,9 @@ def _fixtures(d: Path) -> None:
     (d / "bad_antiskid.yaml").write_text("nonsense_field: 3\n")
     (d / "bad_train.yaml").write_text("algo: nosuch\nn_timesteps: 100\n")
     (d / "neg_train.yaml").write_text("algo: ppo\nn_timesteps: -5\n")
+    (d / "seeds_dup.yaml").write_text(json.dumps({**suite, "seeds": [0, 0], "cases": [case]}))
+    (d / "seeds_neg.yaml").write_text(json.dumps({**suite, "seeds": [-1], "cases": [case]}))
+    (d / "afile").write_text("not a folder")
     (d / "train_out").mkdir()
     (d / "train_out" / "x.txt").write_text("not a run")
     (d / "empty_run").mkdir()
@@ -112,6 +119,7 @@ def _traces(d: Path) -> None:
     rows[8][1] = str(float(rows[8][1]) + 60.0)
     spoil("jump", [",".join(r) for r in rows])
     spoil("fields", [lines[0], *(r + ",1" for r in lines[1:])])
+    spoil("huge_field", [lines[0], "1," + "9" * 200_000, *lines[2:]])
 
 
 def _env(**kwargs: Any) -> Any:
@@ -188,6 +196,14 @@ def cases() -> list[Case]:
     cli(s, "negative noise", "--speed-noise-kmh", "--speed-noise-kmh", "-1")
     cli(s, "noise 1e9", "--pressure-noise-bar", "--pressure-noise-bar", "1e9")
     cli(s, "unknown demand", "--demand", "--demand", "brake")
+    cli(s, "speed 0.5 km/h", "--speed-kmh", "--speed-kmh", "0.5")
+    cli(s, "policy is a folder", "--policy", "--policy", "a_folder")
+    cli(s, "JSON with a trailing slash", "--json", "--json", "sub/")
+    cli(s, "JSON onto a device", "--json", "--json", "/dev/null")
+    cli(s, "JSON onto the trace's CSV", "also another output", "--trace", "run", "--json",
+        "run.csv")  # fmt: skip
+    cli(s, "plot onto the trace's metadata", "also another output", "--trace", "x", "--plot",
+        "x.meta.json")  # fmt: skip
     cli(s, "unknown option", "--bogus", "--bogus", "1")
 
     e = "evaluate"
@@ -205,6 +221,10 @@ def cases() -> list[Case]:
         "not_a_report")  # fmt: skip
     cli(e, "report onto a file", "--report", "--policy", "none", "--report", "dup_suite.yaml")
     cli(e, "unknown vehicle", "nosuch", "--policy", "none", "--vehicle", "nosuch")
+    cli(e, "a seed twice", "seeds", "--policy", "none", "--suite", "seeds_dup.yaml")
+    cli(e, "a negative seed", "seeds[0]", "--policy", "none", "--suite", "seeds_neg.yaml")
+    cli(e, "JSON inside the report folder", "inside one another", "--policy", "none",
+        "--report", "rep", "--json", "rep/r.json")  # fmt: skip
     cli(e, "WSP config without classical", "--wsp-config", "--policy", "none", "--wsp-config",
         "x.yaml")  # fmt: skip
 
@@ -220,6 +240,8 @@ def cases() -> list[Case]:
     cli(k, "time going back", "time_s", "time_back.csv")
     cli(k, "a 60 km/h ground-speed jump", "v_train_kmh", "jump.csv")
     cli(k, "rows longer than the header", "fields.csv", "fields.csv")
+    cli(k, "a 200 kB field", "huge_field.csv", "huge_field.csv")
+    cli(k, "JSON onto its own input", "inputs", "good.csv", "--json", "good.meta.json")
     cli(k, "export where no folder can be", "--export", "good.csv", "--export",
         "/proc/nope/r.yaml")  # fmt: skip
     cli(k, "report over a folder of other files", "--report", "good.csv", "--report",
@@ -243,6 +265,7 @@ def cases() -> list[Case]:
         "--total-timesteps", "0")  # fmt: skip
     cli(t, "out is a folder of other files", "train_out", "--config", TRAIN, "--out",
         "train_out")  # fmt: skip
+    cli(t, "out is a file", "afile", "--config", TRAIN, "--out", "afile")
     cli(t, "JSON where no folder can be", "--json", "--config", TRAIN, "--out", "run",
         "--json", "/proc/nope/t.json")  # fmt: skip
 
@@ -255,6 +278,7 @@ def cases() -> list[Case]:
     cli(r, "missing rig config", "missing.yaml", "--rig-config", "missing.yaml")
     cli(r, "rig config with a bad field", "bad_rig.yaml", "--rig-config", "bad_rig.yaml")
     cli(r, "negative roller noise", "--omega-noise-kmh", "--omega-noise-kmh", "-1")
+    cli(r, "roller noise 1e300", "omega_noise_kmh", "--omega-noise-kmh", "1e300")
     cli(r, "negative seed", "--seed", "--seed", "-1")
     cli(r, "level 5", "--mu-contaminated", "--mu-contaminated", "5")
     cli(r, "unknown rail", "gravel", "--rail", "gravel")
@@ -279,33 +303,38 @@ def cases() -> list[Case]:
 
     n = "environment"
     api = [
-        ("options.mu_contaminated NaN", "mu_contaminated", _reset({"mu_contaminated": math.nan})),
-        ("options.mu_contaminated -0.1", "mu_contaminated", _reset({"mu_contaminated": -0.1})),
-        ("options.mu_contaminated 5", "mu_contaminated", _reset({"mu_contaminated": 5.0})),
-        ("options.pattern misspelt", "pattern", _reset({"pattern": "unifrom"})),
-        ("options.axle_mu_factor negative", "axle_mu_factor",
+        ("options.mu_contaminated NaN", "options.mu_contaminated:",
+         _reset({"mu_contaminated": math.nan})),
+        ("options.mu_contaminated -0.1", "options.mu_contaminated:",
+         _reset({"mu_contaminated": -0.1})),
+        ("options.mu_contaminated 5", "options.mu_contaminated:", _reset({"mu_contaminated": 5.0})),
+        ("options.pattern misspelt", "options.pattern:", _reset({"pattern": "unifrom"})),
+        ("options.axle_mu_factor negative", "options.axle_mu_factor[0]:",
          _reset({"axle_mu_factor": [-1, 1, 1, 1]})),
-        ("options.axle_mu_factor 3 of 4 axles", "axle_mu_factor",
+        ("options.axle_mu_factor 3 of 4 axles", "options.axle_mu_factor:",
          _reset({"axle_mu_factor": [1, 1, 1]})),
-        ("options.gradient_permille 1e6", "gradient_permille",
+        ("options.gradient_permille 1e6", "options.gradient_permille:",
          _reset({"gradient_permille": 1e6})),
-        ("options.speed_kmh above the maximum", "speed_kmh", _reset({"speed_kmh": 900.0})),
-        ("options.speed_kmh a word", "speed_kmh", _reset({"speed_kmh": "fast"})),
-        ("options.load_factor 0", "load_factor", _reset({"load_factor": 0.0})),
-        ("options.demand unknown", "demand", _reset({"demand": "brake"})),
-        ("options.rail unknown", "rail", _reset({"rail": "gravel"})),
-        ("an unknown option", "options.bogus", _reset({"bogus": 1})),
-        ("max_time_s -5", "max_time_s", lambda: _env(max_time_s=-5.0)),
-        ("substep_s 0", "substep_s", lambda: _env(substep_s=0.0)),
-        ("substep_s not dividing the period", "substep_s", lambda: _env(substep_s=0.003)),
-        ("action_mode unknown", "action_mode", lambda: _env(action_mode="foo")),
+        ("options.speed_kmh above the maximum", "options.speed_kmh:", _reset({"speed_kmh": 900.0})),
+        ("options.speed_kmh a word", "options.speed_kmh:", _reset({"speed_kmh": "fast"})),
+        ("options.load_factor 0", "options.load_factor:", _reset({"load_factor": 0.0})),
+        ("options.demand unknown", "options.demand:", _reset({"demand": "brake"})),
+        ("options.rail unknown", "options.rail:", _reset({"rail": "gravel"})),
+        ("an unknown option", "options.bogus:", _reset({"bogus": 1})),
+        ("max_time_s -5", "max_time_s:", lambda: _env(max_time_s=-5.0)),
+        ("substep_s 0", "substep_s:", lambda: _env(substep_s=0.0)),
+        ("substep_s not dividing the period", "substep_s:", lambda: _env(substep_s=0.003)),
+        ("action_mode unknown", "action_mode:", lambda: _env(action_mode="foo")),
         ("vehicle unknown", "nosuch", lambda: _env(vehicle="nosuch")),
-        ("reward distance scale -1", "distance_scale_m",
+        ("reward distance scale -1", "reward.distance_scale_m:",
          lambda: _env(reward={"distance_scale_m": -1.0})),
-        ("scenario rail unknown", "gravel", lambda: _env(scenario={"rails": {"gravel": 1.0}})),
-        ("step before reset", "reset", _step_before_reset),
-        ("NaN action", "action", _step(np.full(4, np.nan, dtype=np.float32))),
-        ("action of the wrong shape", "action", _step(np.ones(3, dtype=np.float32))),
+        ("scenario rail unknown", "scenario.rails.gravel:",
+         lambda: _env(scenario={"rails": {"gravel": 1.0}})),
+        ("step before reset", "step before reset", _step_before_reset),
+        ("NaN action", "action:", _step(np.full(4, np.nan, dtype=np.float32))),
+        ("action of the wrong shape", "action:", _step(np.ones(3, dtype=np.float32))),
+        ("substep_s 1e-12", "substep_s:", lambda: _env(substep_s=1e-12)),
+        ("max_time_s 1e9", "max_time_s:", lambda: _env(max_time_s=1e9)),
     ]  # fmt: skip
     c.extend(Case(n, what, call=call, names=names) for what, names, call in api)
     return c
@@ -327,8 +356,21 @@ def _alarm(signum: int, frame: Any) -> None:
     raise _HangError
 
 
-def _files(d: Path) -> set[str]:
-    return {str(p.relative_to(d)) for p in d.rglob("*")}
+def _files(d: Path) -> dict[str, tuple[int, int]]:
+    """Every path in ``d`` with its size and modification time (files) or (-1, -1)."""
+    out = {}
+    for p in d.rglob("*"):
+        st = p.lstat()
+        out[str(p.relative_to(d))] = (st.st_size, st.st_mtime_ns) if p.is_file() else (-1, -1)
+    return out
+
+
+def _changed(before: dict, after: dict) -> list[str]:
+    """What a failed command left, removed or rewrote in its folder."""
+    new = [f"+{p}" for p in after if p not in before]
+    gone = [f"-{p}" for p in before if p not in after]
+    rewritten = [f"~{p}" for p in after if p in before and after[p] != before[p]]
+    return sorted(new + gone + rewritten)
 
 
 def run_case(case: Case, fixtures: Path) -> Outcome:
@@ -357,7 +399,7 @@ def run_case(case: Case, fixtures: Path) -> Outcome:
                 code = stop.code if isinstance(stop.code, int) else 2
     except _HangError:
         return _outcome(case, "hang", f"still running after {HANG_S} s", t0)
-    except (ValueError, RuntimeError, TypeError) as exc:  # the API's documented errors
+    except (ValueError, RuntimeError) as exc:  # the API's documented errors
         if case.call is None:
             return _outcome(case, "traceback", traceback.format_exc(limit=1).strip(), t0)
         message = str(exc)
@@ -370,7 +412,7 @@ def run_case(case: Case, fixtures: Path) -> Outcome:
         signal.alarm(0)
         signal.signal(signal.SIGALRM, old)
         os.chdir(cwd)
-        left = _files(work) - before
+        left = _changed(before, _files(work))
         shutil.rmtree(work, ignore_errors=True)
     from wsp_env.cli import COMPILE_NOTICE  # a first run's notice is no error line
 

@@ -288,8 +288,11 @@ def test_run_setup_names_the_field(field, value):
         ({"substep_s": NAN}, "substep_s"),
         ({"control_period_s": 0.0}, "control_period_s"),
         ({"control_period_s": INF}, "control_period_s"),
-        ({"control_period_s": 0.0205}, "control_period_s"),  # not a whole number of substeps
-        ({"control_period_s": 0.02, "substep_s": 0.03}, "control_period_s"),
+        ({"control_period_s": 0.0205}, "substep_s"),  # the substep does not divide it
+        ({"control_period_s": 0.02, "substep_s": 0.03}, "substep_s"),
+        ({"substep_s": 1e-12}, "substep_s"),  # 2e10 substeps a period: hours per step
+        ({"max_time_s": 1e9}, "max_time_s"),
+        ({"control_period_s": 5.0, "substep_s": 1e-3}, "control_period_s"),
         ({"accelerometer_bias_mps2": -1.0}, "accelerometer_bias_mps2"),
         ({"scenario": {"speed_kmh": [40.0, 250.0]}}, "scenario.speed_kmh[1]"),
         ({"scenario": {"gradient_permille": [-5.0, 500.0]}}, "scenario.gradient_permille[1]"),

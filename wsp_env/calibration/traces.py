@@ -221,6 +221,8 @@ def _read_csv(path: Path) -> tuple[list[str], list[list[str]]]:
                     )  # fmt: skip
     except FileNotFoundError:
         raise _fail(path, "no such file") from None
+    except csv.Error as err:  # e.g. a field over the csv module's 128 KiB limit
+        raise _fail(path, f"not a readable CSV ({err})") from None
     except (OSError, UnicodeDecodeError) as err:
         raise _fail(path, f"cannot read ({err})") from None
     if not rows or not any(h.strip() for h in rows[0]):

@@ -15,6 +15,7 @@ from typing import Any, NoReturn
 import numpy as np
 
 from wsp_env.cli.printing import PRINTERS
+from wsp_env.core.braking import SUBSTEP_MIN_S
 from wsp_env.core.config import ConfigError, check_option, from_dict, load_rail, load_vehicle
 from wsp_env.files import Outputs, write_json
 from wsp_env.physics.jit_cache import compiled
@@ -146,12 +147,13 @@ def _policies(names: list[str], wsp_config: str | None) -> list[Any]:
             policies.append(make_policy(name, wsp_config if name == "classical" else None))
         except FileNotFoundError as err:
             raise UserError(f"--policy: {err}") from None
-    seen: dict[str, int] = {}
-    for pol in policies:
-        seen[pol.name] = seen.get(pol.name, 0) + 1
-    for pol, name in zip(policies, names, strict=True):
-        if seen[pol.name] > 1:  # results are keyed by policy name: keep them apart
-            pol.name = f"{pol.name} ({name})"
+        except IsADirectoryError:
+            raise UserError(f"--policy: {name} is a folder, not a model file") from None
+    counts: dict[str, int] = {}
+    for pol in policies:  # results and report files are keyed by policy name: keep them apart
+        counts[pol.name] = counts.get(pol.name, 0) + 1
+        if counts[pol.name] > 1:
+            pol.name = f"{pol.name}-{counts[pol.name]}"
     return policies
 
 
@@ -203,7 +205,7 @@ def _add_simulate(sub: argparse._SubParsersAction) -> None:
         "--pressure-noise-bar", type=_bounded(0.0, 10.0), default=0.01, help="trace sensor noise"
     )
     p.add_argument(
-        "--dt-s", type=_bounded(1e-5, 0.02), default=1e-3,
+        "--dt-s", type=_positive, default=1e-3,
         help="physics substep (0.001; 1e-5 to the 0.02 s control period, dividing it)",
     )  # fmt: skip
     p.set_defaults(func=cmd_simulate)
@@ -215,6 +217,10 @@ def cmd_simulate(args: argparse.Namespace) -> dict[str, Any]:
 
     vehicle = _vehicle_for_speed(args.vehicle, args.speed_kmh)
     control_period_s = 0.02  # the environment's default BCU cycle
+    if args.dt_s < SUBSTEP_MIN_S or args.dt_s > control_period_s:
+        raise UserError(
+            f"--dt-s: must be in [{SUBSTEP_MIN_S:g}, {control_period_s}], got {args.dt_s:g}"
+        )
     if abs(round(control_period_s / args.dt_s) * args.dt_s - control_period_s) > 1e-9:
         raise UserError(
             f"--dt-s: must divide the {control_period_s} s control period, got {args.dt_s:g}"

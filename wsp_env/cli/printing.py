@@ -163,6 +163,8 @@ def print_traction(result: dict[str, Any]) -> None:
         f"{result['distance_m']:.1f} m in {result['duration_s']:.1f} s, "
         f"{result['final_speed_kmh']:.1f} km/h; mean sliding [{slide}] km/h"
     )
+    if result.get("reached_max_speed"):
+        print("  stopped early: the train reached the vehicle's maximum speed")
 
 
 def print_export(result: dict[str, Any]) -> None:

@@ -422,8 +422,8 @@ class OptionSpec:
 
 
 OPTION_SPECS: dict[str, OptionSpec] = {
-    "speed_kmh": OptionSpec(
-        "number", {"gt": 0.0}, help="initial speed (km/h), at most the vehicle's maximum"
+    "speed_kmh": OptionSpec(  # below 1 km/h a stop is over before the first record
+        "number", {"ge": 1.0}, help="initial speed (km/h), 1 to the vehicle's maximum"
     ),
     "rail": OptionSpec("name", help="a rail condition of the rail table in use"),
     "mu_contaminated": OptionSpec(
@@ -459,8 +459,9 @@ OPTION_SPECS: dict[str, OptionSpec] = {
         "number", _LEVEL, nullable=True,
         help="contamination level outside the sections (None: the rail's)",
     ),
-    "extra_brake_force_N": OptionSpec(
-        "number", {"ge": 0.0}, help="brake force not through the wheels at full demand (N)"
+    "extra_brake_force_N": OptionSpec(  # a magnetic track brake gives ~80 kN per bogie
+        "number", {"ge": 0.0, "le": 1e6}, help="brake force not through the wheels at full "
+        "demand (N), at most 1 MN"
     ),
 }  # fmt: skip
 
@@ -626,8 +627,9 @@ def _resolve(name_or_path: str | Path, folder: str) -> Path:
 def load_vehicle(name_or_path: str | Path) -> VehicleConfig:
     """Load and validate a vehicle config by id (``uic_z1``) or YAML path."""
     path = _resolve(name_or_path, "vehicles")
+    data = read_yaml(path)  # a file it cannot read is named once, there
     try:
-        return from_dict(VehicleConfig, read_yaml(path))
+        return from_dict(VehicleConfig, data)
     except ConfigError as err:
         raise ConfigError(f"{path}: {err}") from None
 

@@ -107,6 +107,11 @@ class SuiteConfig:
                 raise ConfigError(
                     f"{prefix}criteria.{key}: unknown (one of {', '.join(CRITERIA_KEYS)})"
                 )
+        for i, seed in enumerate(self.seeds):
+            if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+                raise ConfigError(f"{prefix}seeds[{i}]: must be a whole number >= 0, got {seed!r}")
+        if len(set(self.seeds)) < len(self.seeds):  # their runs would merge in the results
+            raise ConfigError(f"{prefix}seeds: {list(self.seeds)} repeats a seed")
         first: dict[str, int] = {}
         for i, case in enumerate(self.cases):
             if case.name in first:  # their runs would merge in the results

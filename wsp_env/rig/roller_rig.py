@@ -92,7 +92,8 @@ class RigConfig:
     control_period_s: float = field(default=1e-4, metadata={"gt": 0.0})
     link_stiffness_N_per_m: float = field(default=2.0e7, metadata={"gt": 0.0})
     link_damping_Ns_per_m: float = field(default=1.5e6, metadata={"ge": 0.0})
-    omega_noise_kmh: float = field(default=0.0, metadata={"ge": 0.0})  # roller speed, as km/h
+    # roller speed noise, as km/h (up to 10: a sensor worse than that measures nothing)
+    omega_noise_kmh: float = field(default=0.0, metadata={"ge": 0.0, "le": 10.0})
     force_noise_N: float = field(default=0.0, metadata={"ge": 0.0})
     # 100 Hz: a lag of ~2 ms (2 zeta / omega_n); at 25 Hz (9 ms) a learned policy that modulates
     # near the adhesion peak stopped 2.4 % longer on the rig than on the track (docs/rig.md)

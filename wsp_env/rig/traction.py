@@ -100,7 +100,10 @@ def run_traction(
 ) -> TractionRun:
     """A start from ``speed_kmh`` with ``torque_Nm`` per axle for ``duration_s``; the anti-skid
     device (``antiskid``; None: the seed 002 E402B device, ``seed002_antiskid``;
-    ``no_antiskid``: the full torque throughout) modulates each axle's torque every 20 ms."""
+    ``no_antiskid``: the full torque throughout) modulates each axle's torque every 20 ms.
+    The start ends early when the train reaches the vehicle's maximum speed (a constant
+    driver's torque would otherwise carry it past anything the vehicle can do;
+    ``summary["reached_max_speed"]``)."""
     if antiskid is None and not no_antiskid:
         antiskid = seed002_antiskid()
     if no_antiskid:
@@ -126,7 +129,12 @@ def run_traction(
     rows = []
     every = max(1, round(record_period_s / dt))
     n = round(duration_s / dt)
+    v_max = veh.max_speed_kmh / 3.6
+    reached = False
     for i in range(n):
+        if sim.speed_mps[0] >= v_max:
+            reached = True
+            break
         if antiskid is not None and i > 0:
             factor = antiskid.act(sim.wheel_speed_mps, dt)
         sim.axle_state[0, :, L.AS_EXT_TORQUE] = torque_Nm * factor[0]
@@ -157,6 +165,7 @@ def run_traction(
         "final_speed_kmh": float(sim.speed_mps[0] * 3.6),
         "mean_sliding_kmh": (mean * 3.6).tolist(),
         "std_sliding_kmh": (std * 3.6).tolist(),
+        "reached_max_speed": reached,
     }
     return TractionRun(summary=summary, record=record)
 

@@ -346,6 +346,8 @@ def train(
     from stable_baselines3.common.vec_env import VecNormalize
 
     out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise ConfigError(f"{out}: exists and is not a folder (the run folder)")
     if resume is not None:
         resume = Path(resume)
         ckpt = latest_checkpoint(resume)
