@@ -656,8 +656,7 @@ def build_parser() -> argparse.ArgumentParser:
 # (measured: docs/physics.md, "First run")
 COMPILING = ("simulate", "evaluate", "train", "validate", "rig", "traction", "bench")
 COMPILE_NOTICE = (
-    "wsp-env: compiling the physics kernels (once per install and version; about half a "
-    "minute on 2 cores) ..."
+    "wsp-env: compiling the physics kernels (once per install and version; 10-20 s on 2 cores) ..."
 )
 
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
+import os
 from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parents[1]  # wsp_env/
@@ -70,4 +71,7 @@ def refresh() -> None:
 def compiled() -> bool:
     """Whether the environment step is in the on-disk cache (False on a first run, and after a
     kernel source changed): the first stepping command then compiles for a while."""
-    return any((PACKAGE / "core" / "__pycache__").glob("kernel.env_step_serial-*.nbi"))
+    where = [PACKAGE / "core" / "__pycache__"]
+    if os.environ.get("NUMBA_CACHE_DIR"):  # numba caches there instead (a read-only install)
+        where = [Path(os.environ["NUMBA_CACHE_DIR"])]
+    return any(any(w.rglob("kernel.env_step_serial-*.nbi")) for w in where if w.is_dir())
