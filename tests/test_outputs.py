@@ -219,3 +219,15 @@ def test_a_report_is_replaced_whole(tmp_path):
     assert [p.name for p in rep.iterdir()] == ["report.md"]
     assert (rep / "report.md").read_text() == "new"
     assert [p.name for p in tmp_path.iterdir()] == ["rep"]
+
+
+def test_ctrl_c_writes_nothing_and_says_so(tmp_path, monkeypatch, capsys):
+    import wsp_env.evaluation.plotting as plotting
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(plotting, "plot_run", interrupted)
+    assert _simulate(tmp_path, "--json", tmp_path / "s.json", "--plot", tmp_path / "p.png") == 130
+    assert "interrupted; nothing written" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []

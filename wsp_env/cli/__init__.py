@@ -686,6 +686,9 @@ def main(argv: list[str] | None = None) -> int:
         message = outputs.explain(str(err))  # a producer's error names the output, not its temp
         print(f"wsp-env {args.command}: error: {message}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:  # Ctrl-C: the outputs were removed on the way out (Outputs)
+        print(f"wsp-env {args.command}: interrupted; nothing written", file=sys.stderr)
+        return 130
     try:
         PRINTERS[args.command](result)
         sys.stdout.flush()
