@@ -151,7 +151,7 @@ def print_rig(result: dict[str, Any]) -> None:
           f"{row(result['track_mean_sliding_kmh'], '.2f')} (track)")  # fmt: skip
     print(
         f"  {result['rig_stopping_time_s']:.1f} s of braking in {result['wall_time_s']:.1f} s "
-        f"wall ({result['real_time_factor']:.2g}x real time, compilation included)"
+        f"wall ({result['real_time_factor']:.2g}x real time, any compilation included)"
     )
 
 
