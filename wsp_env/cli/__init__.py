@@ -49,16 +49,6 @@ def _fixed_rail(args: argparse.Namespace) -> dict[str, Any]:
     return out
 
 
-def _positive(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not (np.isfinite(v) and v > 0):
-        raise argparse.ArgumentTypeError(f"must be a positive number, got {text!r}")
-    return v
-
-
 def _bounded(low: float, high: float, low_open: bool = False) -> Any:
     """An argparse type: a finite number in ``[low, high]`` (``(low, high]`` if ``low_open``)."""
 
@@ -69,11 +59,18 @@ def _bounded(low: float, high: float, low_open: bool = False) -> Any:
             raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
         above = v > low if low_open else v >= low
         if not (np.isfinite(v) and above and v <= high):
-            span = f"{'(' if low_open else '['}{low:g}, {high:g}]"
-            raise argparse.ArgumentTypeError(f"must be in {span}, got {text!r}")
+            if np.isinf(high):
+                span = f"a finite number {'>' if low_open else '>='} {low:g}"
+            else:
+                span = f"in {'(' if low_open else '['}{low:g}, {high:g}]"
+            raise argparse.ArgumentTypeError(f"must be {span}, got {text!r}")
         return v
 
     return parse
+
+
+_positive = _bounded(0.0, np.inf, low_open=True)
+_nonneg = _bounded(0.0, np.inf)
 
 
 def _seed(text: str) -> int:
@@ -96,16 +93,6 @@ def _reserve(
 
 # the arguments that name outputs; any other argument naming an existing file is an input
 OUTPUT_ARGS = ("json_path", "plot", "trace", "report", "export", "onnx", "out", "resume")
-
-
-def _nonneg(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not (np.isfinite(v) and v >= 0):
-        raise argparse.ArgumentTypeError(f"must be >= 0, got {text!r}")
-    return v
 
 
 def _meta_of(csv_path: str) -> str:

@@ -296,7 +296,7 @@ def write_trace(stem: str | Path, columns: dict[str, np.ndarray], meta: dict) ->
     try:  # fail before writing anything
         json.dumps(meta, default=json_default, allow_nan=False)
     except (TypeError, ValueError) as exc:
-        raise ValueError(f"meta: not JSON serialisable ({exc})") from None
+        raise ValueError(f"meta: {exc}") from None
 
     names = list(arrays)
     cells = [
