@@ -10,12 +10,14 @@ pressure request by the inverse brake law (``brake.pressure_for_torque``). The t
 the creepage where the axle's current curve peaks (``target=None``: peak tracking) or
 ``xi* = max(creep, slide_kmh / V)``: a constant creep or a constant sliding speed.
 
-``Oracle`` is a sweep over those targets (``TARGETS``): ``evaluation.run_suite`` runs every
+``Oracle`` is a sweep over those targets (``TARGETS``) **and both frozen classical WSPs**
+(``configs/wsp/classical.yaml``, ``classical_accel.yaml``): ``evaluation.run_runs`` runs every
 variant on the same scenarios and seeds through the same code path and keeps, per run, the
 shortest stop among the variants that meet the run's wheel-damage criteria (lock, sliding
-energy, slide duration). It is an upper reference for controllers that hold a slip, not a proof
-of optimality: a controller that times its slips (lets an axle slide to clean the rail, then
-holds the peak) may still beat it.
+energy, slide duration). With the classical WSPs among its variants, nothing the project ships
+as a baseline can beat it on a run; it is an upper reference, not a proof of optimality: a
+controller that times its slips (lets an axle slide to clean the rail, then holds the peak) may
+still beat it, and the benchmark counts how often anything does.
 """
 
 from __future__ import annotations
@@ -165,8 +167,16 @@ class Oracle:
     def __init__(self, targets: tuple[tuple[float, float] | None, ...] = TARGETS) -> None:
         self.targets = targets
 
-    def variants(self) -> list[SlipTracker]:
-        return [SlipTracker(t) for t in self.targets]
+    def variants(self) -> list[Any]:
+        """The slip trackers of ``targets`` and the frozen classical WSP of each sensor tier."""
+        from wsp_env.baselines.classical import TIER_CONFIGS, ClassicalWSP, load_wsp_config
+
+        out: list[Any] = [SlipTracker(t) for t in self.targets]
+        for tier in TIER_CONFIGS:
+            wsp = ClassicalWSP(load_wsp_config(tier=tier))
+            wsp.name = "classical" if tier == "wheels" else "classical_accel"
+            out.append(wsp)
+        return out
 
     @staticmethod
     def choose(candidates: list[dict[str, Any]]) -> dict[str, Any]:

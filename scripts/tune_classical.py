@@ -27,7 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
-from wsp_env.baselines.classical import ClassicalWSP, WSPConfig
+from wsp_env.baselines.classical import ClassicalWSP, WSPConfig, load_wsp_config
+from wsp_env.envs.tiers import TIER_SENSORS, TIERS
 from wsp_env.evaluation import load_suite, run_suite
 from wsp_env.policy import NoWSP
 
@@ -41,8 +42,6 @@ RANGES = {
     "reapply_fast_fraction": (0.0, 0.95),
     "reapply_fill_s": (0.02, 0.3),
     "reapply_hold_s": (0.0, 0.5),
-    "ref_decel_active_mps2": (0.4, 1.5),
-    "ref_adapt_margin": (1.0, 2.0),
     "periodic_release_interval_s": (1.5, 6.0),
     "periodic_release_max_s": (1.0, 4.0),
 }
@@ -51,15 +50,27 @@ LOCKING_RAILS = ("soap", "leaves")  # where locked wheels must lose (DESIGN §3)
 LOCK_MARGIN = 0.03
 
 
+ENV_KWARGS: dict = {}  # the sensor tier's settings (--tier), set in main
+
+
+def tier_kwargs(tier: str) -> dict:
+    """The environment settings of sensor ``tier``: its sensors as the benchmark ids fix them
+    (``wsp_env.envs.tiers``), so that a classical WSP is tuned on the sensors it is judged with."""
+    return {
+        "accelerometer": tier == "wheels+accel",
+        "sensors": dataclasses.asdict(TIER_SENSORS[tier]),
+    }
+
+
 def locked_stops(suite) -> list[float]:
     """Every run's stop with locked wheels (no WSP): the bar the WSP must clear."""
-    results, _ = run_suite("uic_z1", suite, NoWSP(), record="none")
+    results, _ = run_suite("uic_z1", suite, NoWSP(), record="none", env_kwargs=ENV_KWARGS)
     return [r["stopping_distance_m"] for r in results]
 
 
 def evaluate(cfg: WSPConfig, suite, locked: list[float]) -> tuple[float, dict[str, float]]:
     """Objective of one set of thresholds (module docstring) and its parts."""
-    results, _ = run_suite("uic_z1", suite, ClassicalWSP(cfg), record="none")
+    results, _ = run_suite("uic_z1", suite, ClassicalWSP(cfg), record="none", env_kwargs=ENV_KWARGS)
     ratios = [
         r["stopping_distance_m"] / r["reference_distance_m"]
         for r in results
@@ -87,7 +98,8 @@ def _header(args: argparse.Namespace, best: tuple, n_runs: int, wall_s: float) -
         "# these). Tuned on the `tuning` suite (configs/scenarios/tuning.yaml; no level, case or\n"
         "# seed shared with en15595 or heldout) by\n"
         f"#   .venv/bin/python scripts/tune_classical.py --n {args.n} --refine {args.refine} "
-        f"--seed {args.seed}\n"
+        f"--seed {args.seed} --tier {args.tier} --start {args.start}\n"
+        f"# (sensor tier {args.tier}: the sensors of wsp_env/envs/tiers.py TIER_SENSORS)\n"
         f"# budget: {n_runs} candidate settings ({wall_s / 60:.0f} min on a 2-core machine, "
         f"{datetime.date.today().isoformat()});\n"
         f"# result: mean stop / available-adhesion reference {parts['mean_stop_ratio']:.3f} "
@@ -104,13 +116,22 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--suite", default="tuning")
     ap.add_argument("--write", type=Path, help="save the best thresholds to this YAML file")
+    ap.add_argument(
+        "--tier", choices=TIERS, default="wheels",
+        help="sensor tier: its sensors and, as the start, its frozen thresholds (wheels)",
+    )  # fmt: skip
+    ap.add_argument(
+        "--start", choices=("defaults", "frozen"), default="defaults",
+        help="start from WSPConfig's defaults or from the tier's frozen file (defaults)",
+    )  # fmt: skip
     args = ap.parse_args()
+    ENV_KWARGS.update(tier_kwargs(args.tier))
     if args.suite in ("en15595", "heldout"):
         sys.exit(f"--suite: {args.suite} judges the WSP; tune on `tuning`")
     suite = load_suite(args.suite)
     rng = np.random.default_rng(args.seed)
     start = time.perf_counter()
-    base = WSPConfig()
+    base = WSPConfig() if args.start == "defaults" else load_wsp_config(tier="wheels")
     locked = locked_stops(suite)
     rows = [(*evaluate(base, suite, locked), base)]
     print(f"defaults: objective {rows[0][0]:.3f} {rows[0][1]}", flush=True)

@@ -36,7 +36,7 @@ def test_make_and_make_vec_work():
         "WSPBraking-v0", num_envs=3, vectorization_mode="vector_entry_point", vehicle="regiolis"
     )
     obs, _ = venv.reset(seed=0)
-    assert obs.shape == (3, 4 * 16 + 2 + 16)  # regiolis: 16 axles, 16 valves
+    assert obs.shape == (3, 4 * 16 + 3 + 16)  # regiolis: 16 axles, 16 valves, the ref's age
     assert isinstance(venv.unwrapped, WSPBrakingVectorEnv)
     assert venv.metadata["autoreset_mode"].name == "SAME_STEP"
 
@@ -178,7 +178,7 @@ def test_bogie_valves_and_privileged_observation():
     obs, _ = env.reset(seed=0, options={"rail": "soap", "speed_kmh": 200.0})
     n = 32
     base = 4 * n + 2 + 16
-    assert obs.shape == (base + 1 + 2 * n,)
+    assert obs.shape == (base + 1 + 2 * n + 1,)  # the reference's age last
     assert obs[base] == pytest.approx(200 / 360, rel=1e-6)  # true speed / max speed
     assert 0.0 < obs[base + 1] < 0.3  # friction level of axle 1
 
@@ -249,7 +249,7 @@ def test_accelerometer_keeps_the_reference_on_the_train_when_every_wheel_slides(
     plain, venv0 = _locked_stop_reference_error()
     aided, venv1 = _locked_stop_reference_error(accelerometer=True, accelerometer_bias_mps2=0.0)
     assert plain > 20.0 and aided < 0.5, (plain, aided)
-    assert venv1.core.obs_dim == venv0.core.obs_dim + 1 == 23
+    assert venv1.core.obs_dim == venv0.core.obs_dim + 1 == 24
 
 
 def test_accelerometer_reads_specific_force_with_a_bias_drawn_per_episode():
@@ -266,15 +266,16 @@ def test_accelerometer_reads_specific_force_with_a_bias_drawn_per_episode():
     true_decel = (v0 - venv.core.sim.speed_mps[0]) / 0.02
     reading = venv.core.wsp[0, K.W_ACC]
     assert reading == pytest.approx(true_decel - 9.80665 * 0.02, rel=1e-3, abs=2e-3)
-    assert venv.core.obs[0, -1] == pytest.approx(reading / 10.0, rel=1e-6)
+    assert venv.core.obs[0, -2] == pytest.approx(reading / 10.0, rel=1e-6)  # then the age
     biases = []
     for acc in (True, False):
         v = WSPBrakingVectorEnv(num_envs=8, accelerometer=acc, accelerometer_bias_mps2=0.05)
         _, info = v.reset(seed=3)
-        biases.append(v.core.wsp[:, K.W_ACC_BIAS].copy())
+        biases.append(v.core.sensor_par[:, K.SP_ACC_BIAS].copy())
+        drawn = [{k: v for k, v in s.items() if k != "sensors"} for s in info["scenario"]]
         if acc:
-            scen_acc = [dict(s) for s in info["scenario"]]
+            scen_acc = drawn
         else:
-            assert [dict(s) for s in info["scenario"]] == scen_acc
+            assert drawn == scen_acc
     assert np.all(np.abs(biases[0]) <= 0.05) and np.unique(biases[0]).size == 8
     assert np.all(biases[1] == 0.0)

@@ -90,6 +90,8 @@ class SB3Policy:
                 f"{p.with_suffix('.vecnormalize.pkl')} is missing (copy it beside the model)"
             )
         self.vehicle = meta.get("vehicle")
+        # observation layout 0: before the reference's age was observed (2026-11-25)
+        self.observation_layout = int(meta.get("observation_layout", 0))
         self._setup(model, norm, meta["env_kwargs"], meta["name"], int(meta["frame_stack"]))
 
     @classmethod
@@ -99,6 +101,7 @@ class SB3Policy:
         """A policy over a live model (training's validation): its normalisation as it is now."""
         self = cls.__new__(cls)
         self.vehicle = None
+        self.observation_layout = OBSERVATION_LAYOUT
         self._setup(model, model.get_vec_normalize_env(), env_kwargs, name, n_stack)
         return self
 
@@ -129,10 +132,13 @@ class SB3Policy:
                 f"is {core.vehicle.id!r}"
             )
         space = self.model.observation_space
-        if space.shape != (core.obs_dim * self.n_stack,):
+        # a layout-0 model never saw the reference's age (the kernel's last entry): drop it
+        self._drop = core.kernel_obs_dim - 1 if self.observation_layout < 1 else None
+        width = core.obs_dim - (self._drop is not None)
+        if space.shape != (width * self.n_stack,):
             raise ValueError(
                 f"policy {self.name}: trained on observations of shape {space.shape}, "
-                f"this environment gives {(core.obs_dim,)} x {self.n_stack} stacked"
+                f"this environment gives {(width,)} x {self.n_stack} stacked"
             )
         if self.model.action_space != core.action_space():
             raise ValueError(
@@ -141,7 +147,7 @@ class SB3Policy:
                 "valve_group)"
             )
         self._discrete = core.action_mode == "discrete"
-        self._stack = np.zeros((core.n_envs, core.obs_dim * self.n_stack), dtype=np.float32)
+        self._stack = np.zeros((core.n_envs, width * self.n_stack), dtype=np.float32)
         self._state = None
         self._episode_start = np.ones(core.n_envs, dtype=bool)
 
@@ -168,6 +174,8 @@ class SB3Policy:
         return np.clip((obs - mean) / scale, -clip, clip).astype(np.float32)
 
     def act(self, obs: np.ndarray) -> np.ndarray:
+        if self._drop is not None:
+            obs = np.delete(obs, self._drop, axis=1)
         x = self.normalise(obs)
         if self.n_stack > 1:
             assert self._stack is not None, "bind first"
@@ -193,6 +201,9 @@ POLICY_ENV_KWARGS = (
 
 
 META_NAME = "wsp_env.json"  # the metadata entry ``wsp-env train`` adds to every model file
+# the observation layout models are trained on now: 1 = with the reference's age (the kernel's
+# last entry, 2026-11-25); models without the field are layout 0 and get it removed
+OBSERVATION_LAYOUT = 1
 
 # the optional dependency groups (pyproject.toml) and the modules that tell they are installed
 EXTRAS = {"rl": ("torch", "stable_baselines3"), "export": ("onnx", "onnxruntime")}
@@ -260,6 +271,7 @@ def policy_metadata(config: dict[str, Any], name: str) -> dict[str, Any]:
         "algo": config["algo"],
         "vehicle": vehicle if isinstance(vehicle, str) else None,
         "frame_stack": int(config.get("frame_stack", 1) or 1),
+        "observation_layout": OBSERVATION_LAYOUT,
         # True: the model needs its STEM.vecnormalize.pkl (SB3Policy refuses it without)
         "obs_normalization": obs_normalization(config),
         "env_kwargs": {
@@ -315,8 +327,11 @@ def model_metadata(model_path: Path) -> dict[str, Any]:
             f"{model_path}: no {META_NAME} inside and no config.yaml of a training run beside "
             "it: cannot tell the algorithm (models written by `wsp-env train` carry both)"
         )
-    # a run folder's models share stems (best_model, model): the folder tells them apart
-    return policy_metadata(config, f"{model_path.parent.name}/{model_path.stem}")
+    # a run folder's models share stems (best_model, model): the folder tells them apart;
+    # a model without its own entry predates the entry's observation layout (layout 0)
+    meta = policy_metadata(config, f"{model_path.parent.name}/{model_path.stem}")
+    meta["observation_layout"] = 0
+    return meta
 
 
 def _run_config(model_path: Path) -> dict[str, Any] | None:
@@ -367,15 +382,64 @@ def shipped_policies() -> list[str]:
     return sorted(p.stem for p in pretrained_dir().glob("*.zip"))
 
 
-def make_policy(name_or_path: str, wsp_config: str | None = None) -> Any:
-    """``classical``, ``none``, ``oracle``, a shipped policy's name (``agents/pretrained``) or
-    a path to a trained model file. Model files are pickles: load only files you trust."""
+POLICY_METHODS = ("bind", "reset", "act")
+
+
+def load_callable_policy(spec: str) -> Any:
+    """``module:callable``: import ``module``, call ``callable()`` and return the policy it makes
+    (an object with ``bind`` / ``reset`` / ``act``, ``Policy``), so that a controller from any
+    framework can be evaluated. Every failure is one line naming ``spec``."""
+    import importlib
+
+    module_name, _, attr = spec.partition(":")
+    if not module_name or not attr:
+        raise ValueError(f"policy: {spec!r} is not module:callable")
+    try:
+        module = importlib.import_module(module_name)
+    except Exception as err:  # a missing module or one that fails on import: one line
+        raise ValueError(
+            f"policy: {spec}: cannot import {module_name!r} ({type(err).__name__}: {err})"
+        ) from None
+    factory = module
+    for part in attr.split("."):
+        if not hasattr(factory, part):
+            raise ValueError(f"policy: {spec}: {module_name!r} has no attribute {attr!r}")
+        factory = getattr(factory, part)
+    if not callable(factory):
+        raise ValueError(f"policy: {spec}: {attr!r} is not callable")
+    try:
+        policy = factory()
+    except Exception as err:
+        raise ValueError(
+            f"policy: {spec}: calling {attr}() failed ({type(err).__name__}: {err})"
+        ) from None
+    missing = [m for m in POLICY_METHODS if not callable(getattr(policy, m, None))]
+    if missing:
+        raise ValueError(
+            f"policy: {spec}: {attr}() returned a {type(policy).__name__} without "
+            f"{', '.join(missing)} (a policy needs bind, reset and act: wsp_env.policy.Policy)"
+        )
+    if not isinstance(getattr(policy, "name", None), str):
+        try:
+            policy.name = spec
+        except AttributeError:
+            raise ValueError(f"policy: {spec}: the policy has no name and takes none") from None
+    if not hasattr(policy, "privileged"):
+        policy.privileged = False
+    return policy
+
+
+def make_policy(name_or_path: str, wsp_config: str | None = None, tier: str = "wheels") -> Any:
+    """``classical`` (the frozen classical WSP of sensor ``tier``: ``wheels`` or
+    ``wheels+accel``), ``none``, ``oracle``, a shipped policy's name (``agents/pretrained``), a
+    path to a trained model file, or ``module:callable`` (``load_callable_policy``). Model files
+    are pickles, and a module runs code: load only what you trust."""
     if name_or_path == "none":
         return NoWSP()
     if name_or_path == "classical":
         from wsp_env.baselines.classical import ClassicalWSP, load_wsp_config
 
-        return ClassicalWSP(load_wsp_config(wsp_config))
+        return ClassicalWSP(load_wsp_config(wsp_config, tier))
     if name_or_path == "oracle":
         from wsp_env.baselines.oracle import Oracle
 
@@ -386,7 +450,10 @@ def make_policy(name_or_path: str, wsp_config: str | None = None) -> Any:
     if name_or_path in shipped_policies():
         require_extras(f"{name_or_path}: learned policies need", "rl")
         return SB3Policy(pretrained_dir() / f"{name_or_path}.zip")
+    if ":" in name_or_path:
+        return load_callable_policy(name_or_path)
     names = ", ".join(["classical", "none", "oracle", *shipped_policies()])
     raise ValueError(
-        f"policy: {name_or_path!r} is neither a policy name ({names}) nor an existing model file"
+        f"policy: {name_or_path!r} is neither a policy name ({names}), an existing model file "
+        "nor module:callable"
     )

@@ -118,10 +118,10 @@ def _option(name: str) -> Any:
 _LEVEL = _option("mu_contaminated")
 
 
-def _policies(names: list[str], wsp_config: str | None) -> list[Any]:
+def _policies(names: list[str], wsp_config: str | None, tier: str = "wheels") -> list[Any]:
     """The policies named on the command line, each once under a name of its own (two model
     files that call themselves alike are told apart by their paths); ``--wsp-config`` only
-    where a classical WSP reads it."""
+    where a classical WSP reads it; ``classical`` is the frozen classical WSP of ``tier``."""
     from wsp_env.policy import make_policy
 
     if wsp_config is not None and "classical" not in names:
@@ -131,7 +131,9 @@ def _policies(names: list[str], wsp_config: str | None) -> list[Any]:
     policies = []
     for name in names:
         try:
-            policies.append(make_policy(name, wsp_config if name == "classical" else None))
+            policies.append(
+                make_policy(name, wsp_config if name == "classical" else None, tier=tier)
+            )
         except FileNotFoundError as err:
             raise UserError(f"--policy: {err}") from None
         except IsADirectoryError:
@@ -178,6 +180,24 @@ def _add_simulate(sub: argparse._SubParsersAction) -> None:
         "--pattern", choices=("uniform", "step_up", "step_down", "patches"), default=None
     )
     p.add_argument("--demand", choices=("emergency", "service"), default="emergency")
+    p.add_argument(
+        "--gradient-permille", type=_option("gradient_permille"), default=0.0,
+        help="track gradient, per mille, > 0 uphill (0; within +-100)",
+    )  # fmt: skip
+    p.add_argument(
+        "--accelerometer", action="store_true",
+        help="sensor tier wheels+accel: a body accelerometer aids the reference and is "
+        "observed; --policy classical is then the accelerometer-aided classical WSP",
+    )  # fmt: skip
+    p.add_argument(
+        "--accelerometer-bias-mps2", type=_option("accelerometer_bias_mps2"), default=None,
+        help="the accelerometer's bias, exactly (m/s^2, > 0 reads more deceleration; "
+        "default 0; needs an accelerometer)",
+    )  # fmt: skip
+    p.add_argument(
+        "--wheel-speed-noise-kmh", type=_option("wheel_speed_noise_kmh"), default=None,
+        help="standard deviation of each wheel-speed reading (km/h; default 0: exact)",
+    )  # fmt: skip
     p.add_argument("--json", dest="json_path", default=None, help="write the result here")
     p.add_argument("--plot", default=None, help="write a PNG of speeds and pressures")
     p.add_argument("--trace", default=None, help="write a wsp-trace/1 trace STEM.csv + .json")
@@ -213,20 +233,39 @@ def cmd_simulate(args: argparse.Namespace) -> dict[str, Any]:
             f"--dt-s: must divide the {control_period_s} s control period, got {args.dt_s:g}"
         )
     rail = load_rail(args.rail, args.rails_config)  # a bad table or rail fails here, named
-    (policy,) = _policies([args.policy], args.wsp_config)
+    tier = "wheels+accel" if args.accelerometer else "wheels"
+    (policy,) = _policies([args.policy], args.wsp_config, tier)
+    own = getattr(policy, "env_kwargs", {}).get("accelerometer")
+    if args.accelerometer and own is False:
+        raise UserError(f"--accelerometer: policy {policy.name} was trained without one")
+    accelerometer = bool(args.accelerometer or own)
+    if args.accelerometer_bias_mps2 is not None and not accelerometer:
+        raise UserError(
+            "--accelerometer-bias-mps2: there is no accelerometer (add --accelerometer)"
+        )
     plot_tmp = _reserve(args, "plot", "--plot")
     trace_tmp = None
     if args.trace:
         args.trace = str(stem_path(args.trace))  # STEM, STEM.csv and STEM.meta.json name one
         trace_tmp = _reserve(args, "trace", "--trace", "stem")
-    case: dict[str, Any] = {"demand": args.demand, **_fixed_rail(args)}
-    env_kwargs = {"substep_s": args.dt_s, "rails_config": args.rails_config}
+    case: dict[str, Any] = {
+        "demand": args.demand, "gradient_permille": args.gradient_permille, **_fixed_rail(args),
+        "accelerometer_bias_mps2": (
+            args.accelerometer_bias_mps2 if args.accelerometer_bias_mps2 is not None
+            else 0.0 if accelerometer else None
+        ),
+        "wheel_speed_noise_kmh": args.wheel_speed_noise_kmh,
+    }  # fmt: skip
+    case = {k: v for k, v in case.items() if v is not None}
+    env_kwargs = {"substep_s": args.dt_s, "rails_config": args.rails_config,
+                  "accelerometer": accelerometer}  # fmt: skip
     run, record = run_one(vehicle, args.rail, args.speed_kmh, policy, args.seed, case, env_kwargs)
     conditions = run["conditions"]
     result = {
         "vehicle": vehicle.id,
         "rail": args.rail,
         "policy": policy.name,
+        "tier": "wheels+accel" if accelerometer else "wheels",
         "seed": args.seed,
         "mu_contaminated": conditions["mu_contaminated"],
         "pattern_sections": conditions["sections"],
@@ -313,6 +352,68 @@ def cmd_evaluate(args: argparse.Namespace) -> dict[str, Any]:
         from wsp_env.evaluation.report import write_report
 
         write_report(report_tmp, suite, args.vehicle, results, summary, records)
+        payload["report"] = args.report
+    return payload
+
+
+# ---- benchmark ------------------------------------------------------------------------------
+
+
+def _add_benchmark(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "benchmark",
+        help="score controllers on the sealed test set of a vehicle and sensor tier",
+        description="Runs the sealed set (300 fixed-seed stops per vehicle drawn from the "
+        "real world's range: every rail, gradients +-25 per mille, sensor errors, loads, "
+        "demands, speeds to the maximum) of a registered id (WSPBraking-UICZ1-v1, "
+        "WSPBraking-UICZ1-Accel-v1, ...) with every policy and the tier's classical WSP and "
+        "none: score 0 = locked wheels, 1 = the tier's classical WSP (IQM, 95 %% bootstrap "
+        "interval), stop ratio mean and worst, pass rate, damage, air, valve operations, "
+        "watchdog interventions, per scenario family. See docs/benchmark.md.",
+    )
+    p.add_argument(
+        "--policy", action="append", required=True,
+        help="classical | none | oracle | a shipped policy's name | PATH.zip | "
+        "module:callable (repeat to compare); model files are pickles and modules run code: "
+        "load only what you trust",
+    )  # fmt: skip
+    p.add_argument("--tier", choices=("wheels", "wheels+accel"), default="wheels",
+                   help="sensor tier (wheels)")  # fmt: skip
+    p.add_argument("--vehicle", default="uic_z1", help="a vehicle with a benchmark id (uic_z1)")
+    p.add_argument(
+        "--runs", type=int, default=None,
+        help="only the sealed set's first N stops (a quick look; the score of record uses all 300)",
+    )  # fmt: skip
+    p.add_argument("--json", dest="json_path", default=None, help="write the result here")
+    p.add_argument("--report", default=None, help="write report.md into this folder")
+    p.add_argument("--no-progress", action="store_true", help="no progress lines")
+    p.set_defaults(func=cmd_benchmark)
+
+
+def cmd_benchmark(args: argparse.Namespace) -> dict[str, Any]:
+    from wsp_env import BENCHMARK_VEHICLES
+    from wsp_env.evaluation.benchmark import SEALED_RUNS, run_benchmark
+
+    if args.vehicle not in BENCHMARK_VEHICLES:
+        raise UserError(
+            f"--vehicle: {args.vehicle!r} has no benchmark id (one of "
+            f"{', '.join(BENCHMARK_VEHICLES)})"
+        )
+    runs = SEALED_RUNS if args.runs is None else args.runs
+    if not 1 <= runs <= SEALED_RUNS:
+        raise UserError(f"--runs: must be 1-{SEALED_RUNS}, got {args.runs}")
+    policies = _policies(args.policy, None, args.tier)
+    report_tmp = _reserve(args, "report", "--report", "dir")
+
+    def progress(line: str) -> None:
+        if not args.no_progress:
+            print(line, file=sys.stderr, flush=True)
+
+    payload = run_benchmark(policies, args.vehicle, args.tier, runs, progress)
+    if report_tmp is not None:
+        from wsp_env.evaluation.report import write_benchmark_report
+
+        write_benchmark_report(report_tmp, payload)
         payload["report"] = args.report
     return payload
 
@@ -629,6 +730,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
     _add_simulate(sub)
     _add_evaluate(sub)
+    _add_benchmark(sub)
     _add_calibrate(sub)
     _add_bench(sub)
     _add_train(sub)
@@ -641,7 +743,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 # the commands that step the physics, and what a first run of one says while numba compiles
 # (measured: docs/physics.md, "First run")
-COMPILING = ("simulate", "evaluate", "train", "validate", "rig", "traction", "bench")
+COMPILING = ("simulate", "evaluate", "benchmark", "train", "validate", "rig", "traction",
+             "bench")  # fmt: skip
 COMPILE_NOTICE = (
     "wsp-env: compiling the physics kernels (once per install and version; 10-20 s on 2 cores) ..."
 )

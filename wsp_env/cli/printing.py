@@ -176,7 +176,23 @@ def print_export(result: dict[str, Any]) -> None:
     )
 
 
+def print_benchmark(result: dict[str, Any]) -> None:
+    print(
+        f"{result['benchmark']}: {result['runs']} stops"
+        f"{'' if result['sealed'] else ' (the first of the sealed set: not a score of record)'}"
+    )
+    print(f"{'policy':<24} {'score':>6} {'95% interval':>15} {'stop/cls':>8} {'worst':>6} "
+          f"{'pass':>5} {'watchdog':>8}")  # fmt: skip
+    for name, p in result["policies"].items():
+        sc = "-" if p["score"] is None else f"{p['score']:.3f}"
+        ci = "-" if p["score_ci95"] is None else "{:.3f}-{:.3f}".format(*p["score_ci95"])
+        print(f"{name:<24} {sc:>6} {ci:>15} {p['stop_ratio_mean']:>8.3f} "
+              f"{p['stop_ratio_worst']:>6.2f} {100 * p['pass_rate']:>4.0f}% "
+              f"{p['watchdog_interventions']:>8d}")  # fmt: skip
+
+
 PRINTERS = {
+    "benchmark": print_benchmark,
     "simulate": print_simulate,
     "evaluate": print_evaluate,
     "calibrate": print_calibrate,

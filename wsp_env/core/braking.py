@@ -41,6 +41,13 @@ from wsp_env.core.config import (
 from wsp_env.core.kernel import Params, State
 from wsp_env.core.metrics import run_metrics
 from wsp_env.core.records import RunRecord
+from wsp_env.core.sensors import (
+    EstimatorConfig,
+    SensorConfig,
+    WatchdogConfig,
+    draw_sensors,
+    fill_obs_par,
+)
 from wsp_env.core.simulator import RunSetup, TrainSim, draw_run_setup
 from wsp_env.physics import layout as L
 from wsp_env.physics.layout import CMD_HOLD
@@ -111,8 +118,10 @@ SUBSTEP_MIN_S = 1e-5
 CONTROL_PERIOD_S = {"gt": 0.0, "le": 1.0}
 MAX_TIME_S = {"gt": 0.0, "le": 3600.0}
 
-# what ``reset(options=...)`` may fix: the names of ``config.OPTION_SPECS`` (their bounds)
+# what ``reset(options=...)`` may fix: the names of ``config.OPTION_SPECS`` (their bounds);
+# the sensor options set a stop's sensor errors, the rest its scenario
 OPTION_KEYS = tuple(OPTION_SPECS)
+SENSOR_OPTIONS = ("accelerometer_bias_mps2", "wheel_speed_noise_kmh")
 
 
 def _config(cls: type, value: Any, name: str) -> Any:
@@ -137,7 +146,10 @@ class BrakingCore:
         valve_group: str | None = None,
         privileged: bool = False,
         accelerometer: bool = False,
-        accelerometer_bias_mps2: float = 0.05,
+        accelerometer_bias_mps2: float | None = None,
+        sensors: SensorConfig | dict | None = None,
+        estimator: EstimatorConfig | dict | None = None,
+        watchdog: WatchdogConfig | dict | None = None,
         reward: RewardConfig | dict | None = None,
         scenario: ScenarioConfig | dict | None = None,
         rails_config: str | None = None,
@@ -195,27 +207,34 @@ class BrakingCore:
         self.residual_scale = float(residual_scale)
         self.residual_deadband = float(residual_deadband)
         self.privileged = privileged
-        if not (np.isfinite(accelerometer_bias_mps2) and accelerometer_bias_mps2 >= 0.0):
-            raise ValueError(
-                f"accelerometer_bias_mps2: must be >= 0, got {accelerometer_bias_mps2!r}"
-            )
+        self.sensors = _config(SensorConfig, sensors, "sensors")
+        if accelerometer_bias_mps2 is not None:  # the older keyword for the bias's bound
+            bias = check_number(accelerometer_bias_mps2, "accelerometer_bias_mps2", ge=0.0, le=2.0)
+            self.sensors = dataclasses.replace(self.sensors, accelerometer_bias_mps2=bias)
+        self.estimator = _config(EstimatorConfig, estimator, "estimator")
+        self.watchdog = _config(WatchdogConfig, watchdog, "watchdog")
         self.accelerometer = bool(accelerometer)
-        self.accelerometer_bias_mps2 = float(accelerometer_bias_mps2)
+        self.accelerometer_bias_mps2 = self.sensors.accelerometer_bias_mps2
         kernel_dim = K.obs_size(self.n_axles, self.n_valves, privileged, self.accelerometer)
+        self.kernel_obs_dim = kernel_dim
         self._kobs = np.zeros((n_envs, kernel_dim), dtype=np.float32)  # the kernel writes it
         residual = action_mode == "residual"
         self.obs_dim = kernel_dim + (self.n_valves if residual else 0)
         self.terms = np.zeros((n_envs, K.N_TERMS))
         self.flags = np.zeros((n_envs, K.N_F), dtype=np.int64)
         self.wsp = np.zeros((n_envs, K.N_W))
+        self.axle_wsp = np.zeros((n_envs, self.n_axles, K.N_AW))
+        self.axle_wsp[:, :, K.AW_SCALE] = 1.0
+        self.sensor_par = np.zeros((n_envs, K.N_SP))
+        self.sensor_rng = np.zeros(n_envs, dtype=np.uint64)
         self.prev_wheel = np.zeros((n_envs, self.n_axles))
         self.prev_action = np.ones((n_envs, self.n_valves))
         self.obs_par = np.zeros(K.N_OP)
         self.obs_par[K.OP_SPEED_SCALE] = veh.max_speed_kmh / 3.6
         self.obs_par[K.OP_DECEL_SCALE] = 10.0
-        self.obs_par[K.OP_REF_DECEL_LIMIT] = 2.5
-        self.obs_par[K.OP_REF_RISE_LIMIT] = 0.5
         self.obs_par[K.OP_MAX_TIME] = max_time_s
+        self.obs_par[K.OP_AGE_SCALE] = 10.0
+        fill_obs_par(self.obs_par, self.estimator, self.watchdog)
         self.obs_par[K.OP_PRIVILEGED] = 1.0 if privileged else 0.0
         self.obs_par[K.OP_ACCELEROMETER] = 1.0 if self.accelerometer else 0.0
         self.reward_par = self.reward.vector()
@@ -248,12 +267,14 @@ class BrakingCore:
         sim = self.sim
         self.params = Params(
             valve_of_axle=self.valve_of_axle, env_par=sim.env_par, axle_par=sim.axle_par,
-            sections=sim.sections, obs_par=self.obs_par, reward_par=self.reward_par,
+            sections=sim.sections, obs_par=self.obs_par, sensor_par=self.sensor_par,
+            reward_par=self.reward_par,
         )  # fmt: skip
         self.state = State(
             cmd=sim.cmd, env_state=sim.env_state, axle_state=sim.axle_state, field=sim.field,
-            env_acc=sim.env_acc, axle_acc=sim.axle_acc, wsp=self.wsp, prev_wheel=self.prev_wheel,
-            prev_action=self.prev_action, obs=self._kobs, terms=self.terms, flags=self.flags,
+            env_acc=sim.env_acc, axle_acc=sim.axle_acc, wsp=self.wsp, axle_wsp=self.axle_wsp,
+            rng=self.sensor_rng, prev_wheel=self.prev_wheel, prev_action=self.prev_action,
+            obs=self._kobs, terms=self.terms, flags=self.flags,
         )  # fmt: skip
         self._step_args = K.step_args(
             sim.n_sub, sim.dt_s, sim.control_period_s, self.params, self.state
@@ -307,6 +328,8 @@ class BrakingCore:
         core's vehicle and rails; a problem is a one-line ``ConfigError`` naming the option)
         fix what they name, ``rng`` draws the rest from the scenario and the rail."""
         opts = check_options(options, self.vehicle)
+        for key in SENSOR_OPTIONS:
+            opts.pop(key, None)
         if "rail" in opts and opts["rail"] not in self.rails:
             raise ConfigError(
                 f"options.rail: unknown rail {opts['rail']!r} (known: {', '.join(self.rails)})"
@@ -351,11 +374,16 @@ class BrakingCore:
         sim.reset([e])
         self._started[e] = True
         sim.cmd[e] = 1.0
-        # drawn after the scenario: the first scenario after seeding is the same with or without
-        # the accelerometer (later autoreset draws differ: the bias advanced the generator)
-        bias = self.accelerometer_bias_mps2
-        drawn = self.rngs[e].uniform(-bias, bias) if self.accelerometer else 0.0
-        self.wsp[e, K.W_ACC_BIAS] = drawn
+        # drawn after the scenario: the first scenario after seeding is the same whatever the
+        # sensors (later autoreset draws differ where a sensor error advanced the generator)
+        fixed = {k: v for k, v in check_options(options, self.vehicle).items()
+                 if k in SENSOR_OPTIONS}  # fmt: skip
+        row, scales, noise_seed = draw_sensors(
+            self.sensors, self.rngs[e], self.n_axles, self.accelerometer, fixed
+        )
+        self.sensor_par[e] = row
+        self.axle_wsp[e, :, K.AW_SCALE] = scales
+        self.sensor_rng[e] = noise_seed
         K.reset_observation(e, self.params, self.state, sim.control_period_s)
         if self.base is not None:
             self._base_pending.append(e)
@@ -378,6 +406,13 @@ class BrakingCore:
             "pad_factor": s.pad_factor,
             "gradient_permille": s.gradient_permille,
             "demand_fraction": s.demand_fraction,
+            "sensors": {
+                "wheel_speed_noise_kmh": 3.6 * float(self.sensor_par[e, K.SP_WHEEL_NOISE]),
+                "wheel_speed_scale": [float(x) for x in self.axle_wsp[e, :, K.AW_SCALE]],
+                "accelerometer_bias_mps2": (
+                    float(self.sensor_par[e, K.SP_ACC_BIAS]) if self.accelerometer else None
+                ),
+            },
         }
 
     # ---- stepping --------------------------------------------------------------------------
@@ -457,8 +492,26 @@ class BrakingCore:
 
     @property
     def reference_speed_mps(self) -> np.ndarray:
-        """``(n_envs,)`` the environment's WSP reference-speed estimate (a view)."""
+        """``(n_envs,)`` the shared reference-speed estimate every controller observes (a
+        view; ``kernel.update_reference``)."""
         return self.wsp[:, K.W_VREF]
+
+    @property
+    def measured_wheel_speed_mps(self) -> np.ndarray:
+        """``(n_envs, n_axles)`` the wheel-speed sensors' last readings (a view)."""
+        return self.axle_wsp[:, :, K.AW_WHEEL]
+
+    @property
+    def accelerometer_reading_mps2(self) -> np.ndarray:
+        """``(n_envs,)`` the accelerometer's last deceleration reading (zero without one)."""
+        return self.wsp[:, K.W_ACC]
+
+    def watchdog_interventions(self, e: int) -> dict[str, int]:
+        """What the safety watchdog did in env ``e``'s stop: the axles it restored after the
+        safety time, and whether the minimum-deceleration supervision overrode the releases."""
+        axles = int((self.axle_wsp[e, :, K.AW_WD_RESTORED] > 0.0).sum())
+        decel = int(self.wsp[e, K.W_OVERRIDE] > 0.0)
+        return {"safety_time_axles": axles, "min_deceleration": decel, "total": axles + decel}
 
     # ---- a vehicle outside the kernel (hardware in the loop: the roller rig) ----------------
 
@@ -471,17 +524,21 @@ class BrakingCore:
     ) -> None:
         """Write env ``e``'s observation from sensors outside the kernel: the wheel speeds and
         cylinder pressures a rig measures, and the vehicle deceleration over the last period
-        (``None`` on the first period: the reference speed is not advanced). The reference
-        speed is updated as the kernel updates it; the previous period's wheel speeds give the
-        observed decelerations."""
+        (``None`` on the first period: nothing is advanced). The reference speed and the
+        watchdog advance as in the kernel (``kernel.estimate_and_supervise``, the same code);
+        the previous period's wheel speeds give the observed decelerations."""
         sim = self.sim
+        self.axle_wsp[e, :, K.AW_WHEEL] = wheel_speed_mps
         if decel_mps2 is not None:
-            K.update_reference(
-                e, self.wsp, float(np.max(wheel_speed_mps)), decel_mps2, sim.env_par,
-                self.obs_par, sim.control_period_s,
+            if self.accelerometer:
+                self.wsp[e, K.W_ACC] = (
+                    decel_mps2 - sim.env_par[e, L.EP_GRADE_ACC] + self.sensor_par[e, K.SP_ACC_BIAS]
+                )
+            K.estimate_external(
+                e, float(sim.env_state[e, L.ES_T]), pressure_bar, self.params, self.state,
+                sim.control_period_s, self.mode,
             )  # fmt: skip
         state = sim.axle_state.copy()
-        state[e, :, L.AS_OMEGA] = wheel_speed_mps / sim.axle_par[e, :, L.AP_RADIUS]
         state[e, :, L.AS_P] = pressure_bar
         K.write_observation(
             e, self.params, self.state._replace(axle_state=state), sim.control_period_s
@@ -493,8 +550,12 @@ class BrakingCore:
     def act_external(self, e: int, actions: np.ndarray) -> np.ndarray:
         """Env ``e``'s per-axle valve commands from checked ``actions`` for a vehicle outside the
         kernel (a fraction of the demand, or ``CMD_HOLD``); the previous action is kept for the
-        observation as the kernel keeps it."""
-        cmd = self.valve_commands(actions)[e]
+        observation as the kernel keeps it; the safety watchdog has its say as in the kernel
+        (``kernel.watchdog_commands``)."""
+        cmd = self.valve_commands(actions)[e : e + 1].copy()
+        K.watchdog_commands(0, cmd, self.wsp[e : e + 1], self.axle_wsp[e : e + 1], self.obs_par)
+        cmd = cmd[0]
+        self.sim.cmd[e] = cmd  # the period's commands, for the estimator's next update
         if self.mode == K.MODE_CONTINUOUS:
             self.prev_action[e] = np.clip(self.compose(actions)[0][e], -1.0, 1.0)
         else:
@@ -503,8 +564,8 @@ class BrakingCore:
 
     # ---- state (checkpoints: a resumed training run continues bit for bit) -----------------
 
-    _STATE_ARRAYS = ("_kobs", "terms", "flags", "wsp", "prev_wheel", "prev_action",
-                     "episode_return", "episode_terms")  # fmt: skip
+    _STATE_ARRAYS = ("_kobs", "terms", "flags", "wsp", "axle_wsp", "sensor_par", "sensor_rng",
+                     "prev_wheel", "prev_action", "episode_return", "episode_terms")  # fmt: skip
     _SIM_ARRAYS = ("env_par", "axle_par", "sections", "env_state", "axle_state", "field",
                    "env_acc", "axle_acc", "cmd", "initial_energy_J")  # fmt: skip
 
@@ -551,6 +612,7 @@ class BrakingCore:
 
     def episode_info(self, e: int) -> dict[str, Any]:
         metrics = run_metrics(self.sim, e)
+        metrics["watchdog"] = self.watchdog_interventions(e)
         metrics["episode_return"] = float(self.episode_return[e])
         metrics["episode_reward_terms"] = dict(
             zip(TERM_NAMES, (float(x) for x in self.episode_terms[e]), strict=True)

@@ -459,6 +459,15 @@ OPTION_SPECS: dict[str, OptionSpec] = {
         "number", _LEVEL, nullable=True,
         help="contamination level outside the sections (None: the rail's)",
     ),
+    # the stop's sensor errors (core.sensors): fixed exactly instead of drawn
+    "accelerometer_bias_mps2": OptionSpec(
+        "number", {"ge": -2.0, "le": 2.0},
+        help="the accelerometer's bias (m/s^2, > 0 reads more deceleration), within +-2",
+    ),
+    "wheel_speed_noise_kmh": OptionSpec(
+        "number", {"ge": 0.0, "le": 10.0},
+        help="standard deviation of a wheel-speed reading (km/h), 0 to 10",
+    ),
     "extra_brake_force_N": OptionSpec(  # a magnetic track brake gives ~80 kN per bogie
         "number", {"ge": 0.0, "le": 1e6}, help="brake force not through the wheels at full "
         "demand (N), at most 1 MN"

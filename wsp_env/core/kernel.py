@@ -26,6 +26,8 @@ from wsp_env.physics.layout import (
     AS_OMEGA,
     AS_P,
     CMD_HOLD,
+    EP_DEMAND_DELAY,
+    EP_DEMAND_RISE,
     EP_GRADE_ACC,
     EP_P_MAX,
     ES_STOPPED,
@@ -43,7 +45,8 @@ class Params(NamedTuple):
     env_par: np.ndarray  # (n_envs, N_EP): vehicle, brake, rail and scenario per env
     axle_par: np.ndarray  # (n_envs, n_axles, N_AP): radius, inertia, loads, brake gains
     sections: np.ndarray  # (n_envs, MAX_SECTIONS, 3): the rail's adhesion sections
-    obs_par: np.ndarray  # (N_OP,): observation scales and options
+    obs_par: np.ndarray  # (N_OP,): observation scales and options, estimator, watchdog
+    sensor_par: np.ndarray  # (n_envs, N_SP): the sensors' errors of each stop
     reward_par: np.ndarray  # (N_RP,): the reward's exchange rates
 
 
@@ -56,8 +59,10 @@ class State(NamedTuple):
     field: np.ndarray  # (n_envs, n_cells): the rail's contamination along the track
     env_acc: np.ndarray  # (n_envs, N_EA): accumulated energies
     axle_acc: np.ndarray  # (n_envs, n_axles, N_AA): sliding energy, air, slide times
-    wsp: np.ndarray  # (n_envs, N_W): reference speed, accelerometer reading and bias
-    prev_wheel: np.ndarray  # (n_envs, n_axles) m/s: wheel speeds at the last period's start
+    wsp: np.ndarray  # (n_envs, N_W): reference speed, accelerometer reading, watchdog
+    axle_wsp: np.ndarray  # (n_envs, n_axles, N_AW): measured wheel speeds, timers
+    rng: np.ndarray  # (n_envs,) uint64: each env's sensor-noise generator (``uniform``)
+    prev_wheel: np.ndarray  # (n_envs, n_axles) m/s: measured wheel speeds at the period's start
     prev_action: np.ndarray  # (n_envs, n_valves): the last valve action, for the observation
     obs: np.ndarray  # (n_envs, obs_size) float32: the kernel's observation
     terms: np.ndarray  # (n_envs, N_TERMS): the last step's reward terms
@@ -90,21 +95,61 @@ RP_SHAPING_GAMMA = 6  # the discount the shaping is written for (the learner's)
 RP_SLIDE_M_PER_S = 7  # m per second one axle slides deeper than the slide threshold
 N_RP = 8
 
-# observation parameters (``obs_par``)
+# observation parameters (``obs_par``): scales, options, the shared reference-speed estimator
+# (``update_reference``) and the safety watchdog (``watchdog``)
 OP_SPEED_SCALE = 0  # m/s
 OP_DECEL_SCALE = 1  # m/s^2
-OP_REF_DECEL_LIMIT = 2  # m/s^2: the reference speed may fall at most this fast
-OP_REF_RISE_LIMIT = 3  # m/s^2: ... and rise at most this fast
+OP_REF_DECEL_LIMIT = 2  # m/s^2: the reference falls at most this fast (wheels only)
+OP_REF_DECEL_ACTIVE = 3  # m/s^2: ... while the WSP works, before the first slope estimate
 OP_MAX_TIME = 4  # s: truncation
 OP_PRIVILEGED = 5  # 1.0: append true speed, friction level and true creepage
 OP_ACCELEROMETER = 6  # 1.0: a body accelerometer aids the reference speed and is observed
-N_OP = 7
+OP_REF_DECEL_MIN = 7  # m/s^2: the adaptive slope's floor
+OP_REF_ADAPT_MARGIN = 8  # the adaptive slope is this x the deceleration between two anchors
+OP_FREE_ROLL_BAR = 9  # bar: a cylinder below this has its brake off
+OP_FREE_ROLL_S = 10  # s: ... for this long, and a wheel no longer spinning up, rolls freely
+OP_FREE_ROLL_ACCEL = 11  # m/s^2: "no longer spinning up"
+OP_WD_ON = 12  # 1.0: the safety watchdog acts
+OP_WD_SAFETY_S = 13  # s: an axle released longer than this gets the demand back to standstill
+OP_WD_RELEASE_FRACTION = 14  # an axle counts as released below this fraction of the demand
+OP_WD_MIN_DECEL = 15  # m/s^2: minimum-deceleration supervision's floor (0: off)
+OP_WD_MIN_DECEL_S = 16  # s: ... for this long while the full demand stands: override
+OP_WD_DECEL_TAU = 17  # s: time constant of the measured deceleration it supervises
+OP_AGE_SCALE = 18  # s: the observed reference age is age / this
+OP_ACTIVE_SLIP = 19  # m/s: a wheel this far below the reference counts as working ...
+OP_ACTIVE_SLIP_REL = 20  # ... or this fraction of the reference, whichever is larger
+N_OP = 21
+
+# per-env sensor parameters (``sensor_par``; drawn per stop, or fixed by reset options)
+SP_WHEEL_NOISE = 0  # m/s: standard deviation of a wheel-speed reading
+SP_WHEEL_QUANTUM = 1  # m/s: the phonic wheel's speed resolution (0: exact)
+SP_ACC_BIAS = 2  # m/s^2: the accelerometer's bias
+SP_ACC_NOISE = 3  # m/s^2: standard deviation of an accelerometer reading
+SP_ACC_LAG = 4  # s: the accelerometer's first-order lag (0: none)
+N_SP = 5
 
 # per-env WSP-side state (``wsp``)
 W_VREF = 0  # m/s, reference speed estimate
 W_ACC = 1  # m/s^2, the accelerometer's deceleration reading over the last period
-W_ACC_BIAS = 2  # m/s^2, its bias (drawn per episode)
-N_W = 3
+W_SLOPE = 2  # m/s^2, the slope the reference falls at while the WSP works (wheels only)
+W_ANCHOR_V = 3  # m/s, reference at the last anchor (NaN: none yet)
+W_ANCHOR_T = 4  # s, time of the last anchor
+W_AGE = 5  # s since the last anchor, counted once the WSP has acted since it
+W_WORKED = 6  # 1.0: the WSP has acted since the last anchor
+W_ACTIVE = 7  # 1.0: some valve was out of apply in the last period
+W_DECEL = 8  # m/s^2, the measured deceleration the watchdog supervises (filtered)
+W_LOW_FOR = 9  # s the measured deceleration has stayed below the floor
+W_OVERRIDE = 10  # 1.0 once the minimum-deceleration supervision has overridden the releases
+W_SPEED_F = 11  # m/s, the fastest wheel's speed, filtered (the supervision's input)
+N_W = 12
+
+# per-axle sensor, estimator and watchdog state (``axle_wsp``)
+AW_WHEEL = 0  # m/s, the measured wheel speed
+AW_SCALE = 1  # the wheel-speed sensor's scale (1 + error, drawn per stop)
+AW_RELEASED_FOR = 2  # s the cylinder has been below OP_FREE_ROLL_BAR
+AW_WD_RELEASED_FOR = 3  # s the axle has been released (watchdog)
+AW_WD_RESTORED = 4  # 1.0 once the watchdog has given the axle its demand back
+N_AW = 5
 
 OBS_CLIP = 5.0
 MODE_CONTINUOUS = 0
@@ -117,11 +162,17 @@ F_CLIPPED = 2
 F_NAN = 3
 N_F = 4
 
+_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
+_MIX1 = np.uint64(0xBF58476D1CE4E5B9)
+_MIX2 = np.uint64(0x94D049BB133111EB)
+_S30, _S27, _S31, _S11 = np.uint64(30), np.uint64(27), np.uint64(31), np.uint64(11)
+_ONE = np.uint64(1)
+
 
 def obs_size(n_axles: int, n_valves: int, privileged: bool, accelerometer: bool = False) -> int:
     """Length of one observation (see ``write_obs``)."""
     extra = (1 + 2 * n_axles) if privileged else 0
-    return 4 * n_axles + 2 + n_valves + extra + (1 if accelerometer else 0)
+    return 4 * n_axles + 2 + n_valves + extra + (1 if accelerometer else 0) + 1
 
 
 @njit(**INLINE_FLAGS)
@@ -138,31 +189,210 @@ def _clip(x):
 
 
 @njit(**INLINE_FLAGS)
-def update_reference(e, wsp, fastest, train_decel, env_par, obs_par, ctrl_dt):
-    """The WSP's reference speed after one period: the fastest wheel, falling at most at the
-    deceleration limit, or with a body accelerometer at the deceleration it reads
-    (``train_decel`` as a specific force: the gradient's ``g sin(theta)`` is not seen, plus the
-    sensor's bias), as accelerometer-aided WSPs do; rising at most at the rise limit."""
+def uniform(rng, e):
+    """A uniform number in (0, 1] from env ``e``'s sensor generator (splitmix64: a counter-based
+    stream per env, seeded at reset from the env's seeded generator; no shared state, so the
+    parallel step draws the same numbers as the serial one)."""
+    s = rng[e] + _GOLDEN
+    rng[e] = s
+    z = (s ^ (s >> _S30)) * _MIX1
+    z = (z ^ (z >> _S27)) * _MIX2
+    z = z ^ (z >> _S31)
+    return float((z >> _S11) + _ONE) * (1.0 / 9007199254740992.0)
+
+
+@njit(**INLINE_FLAGS)
+def gaussian(rng, e):
+    """A standard normal number (Box-Muller on two ``uniform`` draws)."""
+    u1 = uniform(rng, e)
+    u2 = uniform(rng, e)
+    return math.sqrt(-2.0 * math.log(u1)) * math.cos(2.0 * math.pi * u2)
+
+
+@njit(**INLINE_FLAGS)
+def measure_wheel(e, k, true_mps, sensor_par, axle_wsp, rng):
+    """One wheel-speed reading: the sensor's scale error, Gaussian noise, and the phonic
+    wheel's resolution (the reading is a multiple of it), never below zero."""
+    v = true_mps * axle_wsp[e, k, AW_SCALE]
+    sigma = sensor_par[e, SP_WHEEL_NOISE]
+    if sigma > 0.0:
+        v += sigma * gaussian(rng, e)
+    q = sensor_par[e, SP_WHEEL_QUANTUM]
+    if q > 0.0:
+        v = q * math.floor(v / q + 0.5)
+    return max(v, 0.0)
+
+
+@njit(**INLINE_FLAGS)
+def measure_acceleration(e, train_decel, env_par, sensor_par, wsp, rng, ctrl_dt):
+    """The body accelerometer's deceleration reading over the last period: a specific-force
+    sensor, so it misses the gradient's ``g sin(theta)`` (uphill it reads less deceleration than
+    the train has), plus its bias and noise, through its first-order lag."""
+    a = train_decel - env_par[e, EP_GRADE_ACC] + sensor_par[e, SP_ACC_BIAS]
+    sigma = sensor_par[e, SP_ACC_NOISE]
+    if sigma > 0.0:
+        a += sigma * gaussian(rng, e)
+    tau = sensor_par[e, SP_ACC_LAG]
+    if tau > 0.0:
+        a = wsp[e, W_ACC] + (a - wsp[e, W_ACC]) * (1.0 - math.exp(-ctrl_dt / tau))
+    wsp[e, W_ACC] = a
+
+
+@njit(**INLINE_FLAGS)
+def update_reference(
+    e, t, wheel, decel, pressure, vented, demand, active, wsp, axle_wsp, obs_par, dt
+):
+    """The WSP's reference speed after one period — one estimator for every controller.
+
+    ``wheel``: measured wheel speeds (m/s), ``decel``: their decelerations over the period,
+    ``pressure``: cylinder pressures (bar), ``vented``: the valve command of the period was a
+    full release, ``demand``: the demand (bar), ``active``: the WSP works (a valve out of
+    apply, or a wheel slipping more than ``OP_ACTIVE_SLIP`` / ``OP_ACTIVE_SLIP_REL``, at the
+    period's start). It follows the fastest wheel; when every wheel may slide it must not
+    follow them down: without an accelerometer it falls at most at ``OP_REF_DECEL_LIMIT``, and
+    while the WSP works at an adaptive slope (``OP_REF_ADAPT_MARGIN`` x the deceleration between
+    two anchors, within ``[OP_REF_DECEL_MIN, OP_REF_DECEL_LIMIT]``); with an accelerometer at
+    the deceleration it reads (``W_ACC``: gradient, bias, noise and lag included). **Anchors**,
+    both ways: a wheel whose cylinder has been below ``OP_FREE_ROLL_BAR`` for
+    ``OP_FREE_ROLL_S`` and which no longer spins up rolls with the train, and the reference is
+    set to it, up or down (the periodic release is how a WSP makes one). A wheel slowing faster
+    than ``OP_REF_DECEL_LIMIT`` (faster than any train) is not free: it may be sliding deeper
+    while its cylinder vents."""
+    n_axles = wheel.shape[0]
+    fastest = 0.0
+    for k in range(n_axles):
+        fastest = max(fastest, wheel[k])
     v_ref = wsp[e, W_VREF]
     if obs_par[OP_ACCELEROMETER] > 0.0:
-        a_read = train_decel - env_par[e, EP_GRADE_ACC] + wsp[e, W_ACC_BIAS]
-        wsp[e, W_ACC] = a_read
-        v_ref = max(fastest, v_ref - max(a_read, 0.0) * ctrl_dt)
+        fall = min(max(wsp[e, W_ACC], 0.0), 2.0 * obs_par[OP_REF_DECEL_LIMIT])
+    elif active:
+        fall = wsp[e, W_SLOPE]
     else:
-        v_ref = max(fastest, v_ref - obs_par[OP_REF_DECEL_LIMIT] * ctrl_dt)
-    wsp[e, W_VREF] = min(v_ref, wsp[e, W_VREF] + obs_par[OP_REF_RISE_LIMIT] * ctrl_dt)
+        fall = obs_par[OP_REF_DECEL_LIMIT]
+    v_ref = max(fastest, v_ref - fall * dt)
+    wsp[e, W_ACTIVE] = 1.0 if active else 0.0
+    # anchors: a wheel rolling freely with the train
+    anchor = -1.0
+    for k in range(n_axles):
+        if pressure[k] < obs_par[OP_FREE_ROLL_BAR] or vented[k]:
+            axle_wsp[e, k, AW_RELEASED_FOR] += dt
+        else:
+            axle_wsp[e, k, AW_RELEASED_FOR] = 0.0
+        # no longer spinning up, nor slowing faster than any train decelerates (a wheel whose
+        # valve vents but whose cylinder still brakes may be sliding deeper)
+        free = (
+            axle_wsp[e, k, AW_RELEASED_FOR] >= obs_par[OP_FREE_ROLL_S] - 1e-9
+            and -decel[k] < obs_par[OP_FREE_ROLL_ACCEL]
+            and decel[k] < obs_par[OP_REF_DECEL_LIMIT]
+        )
+        if free:
+            anchor = max(anchor, wheel[k])
+    if anchor >= 0.0 and active and demand > 0.0:
+        span = t - wsp[e, W_ANCHOR_T]
+        if not math.isnan(wsp[e, W_ANCHOR_V]) and span > 1.0:
+            est = (wsp[e, W_ANCHOR_V] - anchor) / span
+            wsp[e, W_SLOPE] = min(
+                max(obs_par[OP_REF_ADAPT_MARGIN] * est, obs_par[OP_REF_DECEL_MIN]),
+                obs_par[OP_REF_DECEL_LIMIT],
+            )
+        v_ref = anchor
+        wsp[e, W_ANCHOR_V] = anchor
+        wsp[e, W_ANCHOR_T] = t
+        wsp[e, W_AGE] = 0.0
+        wsp[e, W_WORKED] = 0.0
+    else:
+        if active:
+            wsp[e, W_WORKED] = 1.0
+        if wsp[e, W_WORKED] > 0.0:
+            wsp[e, W_AGE] += dt
+        else:
+            wsp[e, W_AGE] = 0.0
+    wsp[e, W_VREF] = v_ref
+
+
+@njit(**INLINE_FLAGS)
+def watchdog_commands(e, cmd, wsp, axle_wsp, obs_par):
+    """The safety watchdog's say over this period's valve commands: an axle it has restored,
+    or every axle once the minimum-deceleration supervision has tripped, gets the full demand
+    (until standstill), whatever the controller asked."""
+    if obs_par[OP_WD_ON] <= 0.0:
+        return
+    for k in range(cmd.shape[1]):
+        if axle_wsp[e, k, AW_WD_RESTORED] > 0.0 or wsp[e, W_OVERRIDE] > 0.0:
+            cmd[e, k] = 1.0
+
+
+@njit(**INLINE_FLAGS)
+def watchdog_update(e, cmd, wheel, demand, full_demand, wsp, axle_wsp, obs_par, dt):
+    """Advance the watchdog's timers after a period (EN 15595's WSP watchdog and a
+    minimum-deceleration supervision, outside the controller).
+
+    **Safety time**: an axle whose valve command asks for less than ``OP_WD_RELEASE_FRACTION``
+    of the demand (a vent; a hold keeps what the cylinder has and is not a release) for longer
+    than ``OP_WD_SAFETY_S`` is restored. **Minimum deceleration**: the deceleration of the
+    fastest wheel, filtered twice (speed, then its derivative, ``OP_WD_DECEL_TAU`` each: a
+    wheel-speed sensor's noise is gone, a trend of 0.1 m/s^2 is not), below ``OP_WD_MIN_DECEL``
+    for ``OP_WD_MIN_DECEL_S`` while the full demand stands and every wheel grips (none slips
+    beyond the estimator's working band, so the fastest wheel is the train) overrides every
+    release: the brakes are being withheld, not the rail giving out."""
+    if obs_par[OP_WD_ON] <= 0.0:
+        return
+    n_axles = wheel.shape[0]
+    for k in range(n_axles):
+        if demand > 0.0 and 0.0 <= cmd[e, k] < obs_par[OP_WD_RELEASE_FRACTION]:
+            axle_wsp[e, k, AW_WD_RELEASED_FOR] += dt
+        else:
+            axle_wsp[e, k, AW_WD_RELEASED_FOR] = 0.0
+        if axle_wsp[e, k, AW_WD_RELEASED_FOR] > obs_par[OP_WD_SAFETY_S]:
+            axle_wsp[e, k, AW_WD_RESTORED] = 1.0
+    floor = obs_par[OP_WD_MIN_DECEL]
+    if floor <= 0.0:
+        return
+    fastest = 0.0
+    for k in range(n_axles):
+        fastest = max(fastest, wheel[k])
+    gain = min(1.0, dt / obs_par[OP_WD_DECEL_TAU])
+    speed_old = wsp[e, W_SPEED_F]
+    wsp[e, W_SPEED_F] += (fastest - speed_old) * gain
+    measured = (speed_old - wsp[e, W_SPEED_F]) / dt
+    wsp[e, W_DECEL] += (measured - wsp[e, W_DECEL]) * gain
+    v_ref = wsp[e, W_VREF]
+    band = max(obs_par[OP_ACTIVE_SLIP], obs_par[OP_ACTIVE_SLIP_REL] * v_ref)
+    grip = True
+    for k in range(n_axles):
+        if v_ref - wheel[k] > band:
+            grip = False
+    if full_demand and grip and fastest > 1.5 and wsp[e, W_DECEL] < floor:
+        wsp[e, W_LOW_FOR] += dt
+    else:
+        wsp[e, W_LOW_FOR] = 0.0
+    if wsp[e, W_LOW_FOR] > obs_par[OP_WD_MIN_DECEL_S]:
+        wsp[e, W_OVERRIDE] = 1.0
 
 
 @njit(**KERNEL_FLAGS)
 def write_obs(
-    e, env_par, axle_par, env_state, axle_state, wsp, prev_wheel, prev_action, obs_par, ctrl_dt, obs
+    e,
+    env_par,
+    axle_par,
+    env_state,
+    axle_state,
+    wsp,
+    axle_wsp,
+    prev_wheel,
+    prev_action,
+    obs_par,
+    ctrl_dt,
+    obs,
 ):
     """Observation of env ``e``: what a WSP measures, normalised to about [-1, 1].
 
     ``[v_axle_i / v_s]``, ``[axle deceleration_i / a_s]``, ``[(v_ref - v_axle_i) / max(v_ref, 1)]``,
     ``[p_i / p_max]``, ``p_demand / p_max``, ``v_ref / v_s``, ``[previous action]``, with
-    ``privileged``: ``V / v_s``, ``[friction level_i]``, ``[(V - v_axle_i) / max(V, 1)]``, and
-    with ``accelerometer`` last: the body accelerometer's deceleration reading ``/ a_s``.
+    ``privileged``: ``V / v_s``, ``[friction level_i]``, ``[(V - v_axle_i) / max(V, 1)]``, with
+    ``accelerometer``: the body accelerometer's deceleration reading ``/ a_s``, and last the
+    reference's age (s since its last anchor) ``/ OP_AGE_SCALE``. Wheel speeds are the sensors'
+    readings (``measure_wheel``), ``v_ref`` the shared estimator's (``update_reference``).
     """
     n_axles = axle_par.shape[1]
     n_valves = prev_action.shape[1]
@@ -172,7 +402,7 @@ def write_obs(
     v_ref = wsp[e, W_VREF]
     inv_ref = 1.0 / max(v_ref, 1.0)
     for k in range(n_axles):
-        wheel = axle_state[e, k, AS_OMEGA] * axle_par[e, k, AP_RADIUS]
+        wheel = axle_wsp[e, k, AW_WHEEL]
         obs[e, k] = wheel / v_s
         obs[e, n_axles + k] = _clip((prev_wheel[e, k] - wheel) / ctrl_dt / a_s)
         obs[e, 2 * n_axles + k] = _clip((v_ref - wheel) * inv_ref)
@@ -188,37 +418,132 @@ def write_obs(
         obs[e, base] = v / v_s
         inv_v = 1.0 / max(v, 1.0)
         for k in range(n_axles):
-            wheel = axle_state[e, k, AS_OMEGA] * axle_par[e, k, AP_RADIUS]
+            true_wheel = axle_state[e, k, AS_OMEGA] * axle_par[e, k, AP_RADIUS]
             obs[e, base + 1 + k] = axle_state[e, k, AS_MU_LEVEL]
-            obs[e, base + 1 + n_axles + k] = _clip((v - wheel) * inv_v)
+            obs[e, base + 1 + n_axles + k] = _clip((v - true_wheel) * inv_v)
+    last = obs.shape[1] - 1
     if obs_par[OP_ACCELEROMETER] > 0.0:
-        obs[e, obs.shape[1] - 1] = _clip(wsp[e, W_ACC] / a_s)
+        obs[e, last - 1] = _clip(wsp[e, W_ACC] / a_s)
+    obs[e, last] = _clip(wsp[e, W_AGE] / obs_par[OP_AGE_SCALE])
 
 
 @njit(**KERNEL_FLAGS)
 def reset_obs(
-    e, env_par, axle_par, env_state, axle_state, wsp, prev_wheel, prev_action, obs_par, ctrl_dt, obs
+    e,
+    env_par,
+    axle_par,
+    env_state,
+    axle_state,
+    wsp,
+    axle_wsp,
+    prev_wheel,
+    prev_action,
+    obs_par,
+    ctrl_dt,
+    obs,
+    sensor_par,
+    rng,
 ):
-    """Reset the WSP-side state of env ``e`` after ``TrainSim.reset`` and write its observation."""
-    wsp[e, W_VREF] = env_state[e, ES_V]
-    wsp[e, W_ACC] = 0.0  # the bias (W_ACC_BIAS) is drawn by the caller
+    """Reset the WSP-side state of env ``e`` after ``TrainSim.reset`` (its sensor parameters
+    and generator set by the caller) and write its observation: the sensors' first readings,
+    the reference at the fastest wheel, the watchdog's timers at zero."""
     for k in range(axle_par.shape[1]):
-        prev_wheel[e, k] = axle_state[e, k, AS_OMEGA] * axle_par[e, k, AP_RADIUS]
+        true_wheel = axle_state[e, k, AS_OMEGA] * axle_par[e, k, AP_RADIUS]
+        axle_wsp[e, k, AW_WHEEL] = measure_wheel(e, k, true_wheel, sensor_par, axle_wsp, rng)
+        prev_wheel[e, k] = axle_wsp[e, k, AW_WHEEL]
+        axle_wsp[e, k, AW_RELEASED_FOR] = 0.0
+        axle_wsp[e, k, AW_WD_RELEASED_FOR] = 0.0
+        axle_wsp[e, k, AW_WD_RESTORED] = 0.0
+    fastest = 0.0
+    for k in range(axle_par.shape[1]):
+        fastest = max(fastest, axle_wsp[e, k, AW_WHEEL])
+    wsp[e, W_VREF] = fastest
+    wsp[e, W_ACC] = 0.0
+    wsp[e, W_SLOPE] = obs_par[OP_REF_DECEL_ACTIVE]
+    wsp[e, W_ANCHOR_V] = np.nan
+    wsp[e, W_ANCHOR_T] = 0.0
+    wsp[e, W_AGE] = 0.0
+    wsp[e, W_WORKED] = 0.0
+    wsp[e, W_ACTIVE] = 0.0
+    wsp[e, W_DECEL] = 0.0
+    wsp[e, W_LOW_FOR] = 0.0
+    wsp[e, W_OVERRIDE] = 0.0
+    wsp[e, W_SPEED_F] = fastest
     for j in range(prev_action.shape[1]):
         prev_action[e, j] = 1.0
     write_obs(
-        e,
-        env_par,
-        axle_par,
-        env_state,
-        axle_state,
-        wsp,
-        prev_wheel,
-        prev_action,
-        obs_par,
-        ctrl_dt,
-        obs,
+        e, env_par, axle_par, env_state, axle_state, wsp, axle_wsp, prev_wheel, prev_action,
+        obs_par, ctrl_dt, obs,
+    )  # fmt: skip
+
+
+@njit(**KERNEL_FLAGS)
+def estimate_and_supervise(
+    e, t, pressure, cmd, env_par, wsp, axle_wsp, prev_wheel, prev_action, obs_par, ctrl_dt, mode
+):
+    """After a period, from the sensors' readings (``AW_WHEEL``, ``W_ACC``) and the cylinder
+    pressures (bar): the reference speed and the watchdog's timers. One implementation for the
+    kernel and for a vehicle outside it (the rig, ``BrakingCore.observe_external``); ``cmd``:
+    the valve commands of the period (a full release is 0)."""
+    n_axles = pressure.shape[0]
+    wheel = np.empty(n_axles)
+    decel = np.empty(n_axles)
+    vented = np.empty(n_axles, dtype=np.bool_)
+    for k in range(n_axles):
+        wheel[k] = axle_wsp[e, k, AW_WHEEL]
+        decel[k] = (prev_wheel[e, k] - wheel[k]) / ctrl_dt
+        vented[k] = cmd[e, k] == 0.0
+    # the WSP works: a valve was out of apply in the period, or a wheel slipped at its start
+    active = False
+    for j in range(prev_action.shape[1]):
+        if prev_action[e, j] < (1.0 if mode == MODE_DISCRETE else 1.0 - 1e-6):
+            active = True
+    v_ref_old = wsp[e, W_VREF]
+    slip_min = max(obs_par[OP_ACTIVE_SLIP], obs_par[OP_ACTIVE_SLIP_REL] * v_ref_old)
+    for k in range(n_axles):
+        if v_ref_old - prev_wheel[e, k] > slip_min:
+            active = True
+    demand = demand_bar(env_par, e, t)
+    update_reference(
+        e, t, wheel, decel, pressure, vented, demand, active, wsp, axle_wsp, obs_par, ctrl_dt
     )
+    full = t >= env_par[e, EP_DEMAND_DELAY] + env_par[e, EP_DEMAND_RISE]
+    watchdog_update(e, cmd, wheel, demand, full, wsp, axle_wsp, obs_par, ctrl_dt)
+
+
+@njit(**KERNEL_FLAGS)
+def sense_and_estimate(
+    e,
+    t,
+    train_decel,
+    cmd,
+    env_par,
+    axle_par,
+    axle_state,
+    wsp,
+    axle_wsp,
+    prev_wheel,
+    prev_action,
+    obs_par,
+    sensor_par,
+    rng,
+    ctrl_dt,
+    mode,
+):
+    """After a period of physics: the sensors read the simulated vehicle, then
+    ``estimate_and_supervise``."""
+    n_axles = axle_par.shape[1]
+    pressure = np.empty(n_axles)
+    for k in range(n_axles):
+        true_wheel = axle_state[e, k, AS_OMEGA] * axle_par[e, k, AP_RADIUS]
+        axle_wsp[e, k, AW_WHEEL] = measure_wheel(e, k, true_wheel, sensor_par, axle_wsp, rng)
+        pressure[k] = axle_state[e, k, AS_P]
+    if obs_par[OP_ACCELEROMETER] > 0.0:
+        measure_acceleration(e, train_decel, env_par, sensor_par, wsp, rng, ctrl_dt)
+    estimate_and_supervise(
+        e, t, pressure, cmd, env_par, wsp, axle_wsp, prev_wheel, prev_action, obs_par, ctrl_dt,
+        mode,
+    )  # fmt: skip
 
 
 @njit(**KERNEL_FLAGS)
@@ -240,6 +565,9 @@ def env_step_one(
     env_acc,
     axle_acc,
     wsp,
+    axle_wsp,
+    sensor_par,
+    rng,
     prev_wheel,
     prev_action,
     obs_par,
@@ -273,6 +601,7 @@ def env_step_one(
             cmd[e, k] = 0.5 * (a + 1.0)
         else:
             cmd[e, k] = 0.0 if a == 0.0 else (CMD_HOLD if a == 1.0 else 1.0)
+    watchdog_commands(e, cmd, wsp, axle_wsp, obs_par)
     flags[e, F_CLIPPED] = clipped
     flags[e, F_NAN] = bad
     x0 = env_state[e, ES_X]
@@ -281,7 +610,7 @@ def env_step_one(
     air0 = 0.0
     slide0 = 0.0
     for k in range(n_axles):
-        prev_wheel[e, k] = axle_state[e, k, AS_OMEGA] * axle_par[e, k, AP_RADIUS]
+        prev_wheel[e, k] = axle_wsp[e, k, AW_WHEEL]
         damage0 += damage_cost(axle_acc[e, k, AA_SLIDE_E], reward_par)
         air0 += axle_acc[e, k, AA_AIR_L]
         slide0 += axle_acc[e, k, AA_SLIDE_T]
@@ -299,12 +628,12 @@ def env_step_one(
         env_acc,
         axle_acc,
     )
-    # --- WSP reference speed (``update_reference``) -----------------------------------------
-    fastest = 0.0
-    for k in range(n_axles):
-        fastest = max(fastest, axle_state[e, k, AS_OMEGA] * axle_par[e, k, AP_RADIUS])
+    # --- sensors, the shared reference speed, the watchdog ----------------------------------
     train_decel = (v0 - env_state[e, ES_V]) / ctrl_dt
-    update_reference(e, wsp, fastest, train_decel, env_par, obs_par, ctrl_dt)
+    sense_and_estimate(
+        e, env_state[e, ES_T], train_decel, cmd, env_par, axle_par, axle_state, wsp, axle_wsp,
+        prev_wheel, prev_action, obs_par, sensor_par, rng, ctrl_dt, mode,
+    )  # fmt: skip
     # --- reward terms (costs in metres of stopping distance) -------------------------------------
     v = env_state[e, ES_V]
     locked = 0.0
@@ -335,18 +664,9 @@ def env_step_one(
         1 if flags[e, F_TERMINATED] == 0 and env_state[e, ES_T] >= obs_par[OP_MAX_TIME] else 0
     )
     write_obs(
-        e,
-        env_par,
-        axle_par,
-        env_state,
-        axle_state,
-        wsp,
-        prev_wheel,
-        prev_action,
-        obs_par,
-        ctrl_dt,
-        obs,
-    )
+        e, env_par, axle_par, env_state, axle_state, wsp, axle_wsp, prev_wheel, prev_action,
+        obs_par, ctrl_dt, obs,
+    )  # fmt: skip
 
 
 ARG_ENV_PAR = 7  # position of env_par in the entry points' arguments
@@ -374,21 +694,39 @@ def step_args(
     return (
         p.valve_of_axle, n_sub, dt_s, control_period_s, s.cmd, p.env_par, p.axle_par,
         p.sections, s.env_state, s.axle_state, s.field, s.env_acc, s.axle_acc, s.wsp,
-        s.prev_wheel, s.prev_action, p.obs_par, p.reward_par, s.obs, s.terms, s.flags,
+        s.axle_wsp, p.sensor_par, s.rng, s.prev_wheel, s.prev_action, p.obs_par, p.reward_par,
+        s.obs, s.terms, s.flags,
     )  # fmt: skip
 
 
 def reset_observation(e: int, p: Params, s: State, control_period_s: float) -> None:
     """``reset_obs`` on the bundles: env ``e``'s WSP state after ``TrainSim.reset``."""
     reset_obs(
-        e, p.env_par, p.axle_par, s.env_state, s.axle_state, s.wsp, s.prev_wheel, s.prev_action,
-        p.obs_par, control_period_s, s.obs,
+        e, p.env_par, p.axle_par, s.env_state, s.axle_state, s.wsp, s.axle_wsp, s.prev_wheel,
+        s.prev_action, p.obs_par, control_period_s, s.obs, p.sensor_par, s.rng,
     )  # fmt: skip
 
 
 def write_observation(e: int, p: Params, s: State, control_period_s: float) -> None:
     """``write_obs`` on the bundles: env ``e``'s observation from its state."""
     write_obs(
-        e, p.env_par, p.axle_par, s.env_state, s.axle_state, s.wsp, s.prev_wheel, s.prev_action,
-        p.obs_par, control_period_s, s.obs,
+        e, p.env_par, p.axle_par, s.env_state, s.axle_state, s.wsp, s.axle_wsp, s.prev_wheel,
+        s.prev_action, p.obs_par, control_period_s, s.obs,
+    )  # fmt: skip
+
+
+def estimate_external(
+    e: int,
+    t_s: float,
+    pressure_bar: np.ndarray,
+    p: Params,
+    s: State,
+    control_period_s: float,
+    mode: int,
+) -> None:
+    """``estimate_and_supervise`` on the bundles, for readings written from outside the kernel
+    (``AW_WHEEL``: a rig's wheel speeds)."""
+    estimate_and_supervise(
+        e, t_s, np.ascontiguousarray(pressure_bar, dtype=np.float64), s.cmd, p.env_par, s.wsp,
+        s.axle_wsp, s.prev_wheel, s.prev_action, p.obs_par, control_period_s, mode,
     )  # fmt: skip

@@ -1,4 +1,8 @@
-"""``WSPBraking-v0``: wheel slide protection as a Gymnasium environment (single and native vector).
+"""``WSPBraking``: wheel slide protection as a Gymnasium environment (single and native vector).
+
+Registered as ``WSPBraking-v0`` (every argument free) and, for the benchmark, as one id per
+vehicle and sensor tier that fixes every setting a score depends on (``wsp_env.registration``:
+``WSPBraking-UICZ1-v1``, ``WSPBraking-UICZ1-Accel-v1``, ...).
 
 ## Description
 
@@ -30,10 +34,13 @@ Valves are per axle (``n_valves = n_axles``), or per bogie with ``valve_group="b
 ``Box(-5, 5, (obs_dim,), float32)``: what a WSP measures, normalised, grouped by channel (all
 wheel speeds, then all decelerations, ...), for a vehicle of ``n`` axles and ``m`` valves.
 ``v_s`` is the vehicle's maximum speed, ``a_s = 10 m/s^2``, ``p_max`` the cylinder's maximum
-pressure; ``v_ref`` the environment's reference speed (the fastest wheel, falling at most
-2.5 m/s^2 and rising at most 0.5 m/s^2 — above any dry-rail deceleration, so on good adhesion
-it is the train speed; with ``accelerometer=True`` it falls at the deceleration the body
-accelerometer reads instead).
+pressure. Wheel speeds are the **sensors'** readings (``sensors``, ``SensorConfig``: resolution,
+noise, scale error; ideal by default), never the true ones. ``v_ref`` is the **shared
+reference-speed estimator's** (``estimator``, ``EstimatorConfig``; the classical WSP reads the
+same one): the fastest wheel, falling at most 2.5 m/s^2 — above any dry-rail deceleration, so on
+good adhesion it is the train speed — and, while the valves work, at an adaptive slope; with
+``accelerometer=True`` at the deceleration the accelerometer reads; re-anchored up or down on a
+wheel that rolls freely (brake off 0.3 s, not spinning up).
 
 | index | quantity | unit | normalisation |
 |---|---|---|---|
@@ -45,11 +52,21 @@ accelerometer reads instead).
 | ``4n+1`` | reference speed ``v_ref`` | m/s | ``/ v_s`` |
 | ``4n+2 .. 4n+m+1`` | previous valve action | - | as the action (discrete: mode - 1) |
 | ``privileged=True``: next ``1 + 2n`` | true train speed ``V``; friction level of axle ``i``; true creepage ``(V - v_i)`` | m/s; -; m/s | ``/ v_s``; none; ``/ max(V, 1 m/s)``, clipped |
-| ``accelerometer=True``: next 1 | the body accelerometer's deceleration over the period (a specific force: the gradient's ``g sin(theta)`` is missing from it, plus a bias drawn per episode within ``+-accelerometer_bias_mps2``) | m/s^2 | ``/ a_s``, clipped |
+| ``accelerometer=True``: next 1 | the body accelerometer's deceleration over the period (a specific force: the gradient's ``g sin(theta)`` is missing from it, plus a bias drawn per episode within ``+-accelerometer_bias_mps2``, noise and lag: ``SensorConfig``) | m/s^2 | ``/ a_s``, clipped |
+| next 1 | the reference's age: seconds since the estimator's last anchor, counted once the valves have worked since it (a periodic release is due when it grows) | s | ``/ 10 s``, clipped |
 | ``action_mode="residual"``: last ``m`` | the classical WSP's requests for this period | - | as actions in ``[-1, 1]`` |
 
-So ``obs_dim = 4n + 2 + m (+ 1 + 2n privileged) (+ 1 accelerometer) (+ m residual)``: 22 for the
+So ``obs_dim = 4n + 3 + m (+ 1 + 2n privileged) (+ 1 accelerometer) (+ m residual)``: 23 for the
 4-axle ``uic_z1`` with per-axle valves.
+
+## Safety watchdog
+
+Between the agent and the valves, as in a real brake control unit and the same for every
+controller (``watchdog``, ``WatchdogConfig``, on by default): an axle whose cylinder stays below
+20 % of the demand for longer than the safety time (10 s) gets the full demand back until
+standstill; when the deceleration the sensors measure stays below 0.12 m/s^2 for 3 s while the
+full demand stands, every release is overridden until standstill. ``info["metrics"]
+["watchdog"]`` counts its interventions. The observation's previous action is the agent's own.
 
 ## Rewards
 
@@ -85,7 +102,8 @@ gradient +-5 per mille, 70 % emergency demand), then the rail's adhesion level a
 ``configs/rails.yaml``. ``options`` fixes any drawn parameter: ``speed_kmh``, ``rail``,
 ``mu_contaminated``, ``pattern``, ``load_factor``, ``pad_factor``, ``gradient_permille``,
 ``demand`` (``"emergency"`` / ``"service"``), ``sections``, ``axle_mu_factor``,
-``recovery_basis``, ``background``, ``extra_brake_force_N``. The train starts at that speed,
+``recovery_basis``, ``background``, ``extra_brake_force_N``, and the stop's sensor errors
+``accelerometer_bias_mps2`` (exact, m/s^2) and ``wheel_speed_noise_kmh``. The train starts at that speed,
 every wheel rolling, cylinders empty, the demand rising after the brake's delay. ``info`` holds
 ``"scenario"``.
 
@@ -112,7 +130,10 @@ num_envs=N, **kwargs)``:
 | ``valve_group`` | str or None | None | ``axle`` or ``bogie``; None: the vehicle config's |
 | ``privileged`` | bool | False | append true speed, friction levels and creepage (an oracle's view) |
 | ``accelerometer`` | bool | False | the WSP has a body accelerometer (observed; aids the reference) |
-| ``accelerometer_bias_mps2`` | float | ``0.05`` | its bias is drawn per episode within +- this |
+| ``accelerometer_bias_mps2`` | float or None | None | its bias is drawn per episode within +- this (None: ``sensors``', 0.05) |
+| ``sensors`` | SensorConfig or dict | ideal wheel sensors | the sensor model (Observation Space) |
+| ``estimator`` | EstimatorConfig or dict | defaults | the shared reference-speed estimator |
+| ``watchdog`` | WatchdogConfig or dict | on | the safety watchdog (Safety watchdog) |
 | ``reward`` | RewardConfig or dict | defaults | the reward's exchange rates (Rewards) |
 | ``scenario`` | ScenarioConfig or dict | defaults | what ``reset`` draws from (Starting State) |
 | ``rails_config`` | str or None | None | a rails YAML instead of ``configs/rails.yaml`` |
@@ -128,6 +149,15 @@ num_envs=N, **kwargs)``:
   on the frozen classical WSP (with ``residual_scale`` / ``residual_deadband``), the optional
   body accelerometer, privileged observations, distance-damage-lock-air reward with optional
   potential-based shaping and slide pricing; single and native vector entry points.
+* v1 (2026-11-25; ``WSPBraking-v0``'s arguments changed with it, the benchmark's ids are
+  ``-v1``): one sensor model for every controller (wheel speeds are readings, with optional
+  resolution, noise and scale error; the accelerometer has noise and lag besides bias and
+  gradient); one reference-speed estimator shared with the classical WSP (adaptive slope,
+  anchors on free-rolling wheels both ways: it can no longer drift above the train
+  uncorrected); the reference's age is observed (``obs_dim`` + 1); the safety watchdog acts on
+  every controller; the benchmark ids fix vehicle, sensor tier, sensor errors, the scenario
+  distribution (gradients +-25 per mille, every rail, load, pads, speeds 40 km/h to the
+  maximum), reward, watchdog and timing.
 """
 
 from __future__ import annotations
@@ -143,6 +173,7 @@ from gymnasium.vector.utils import batch_space
 from wsp_env.core import kernel as K
 from wsp_env.core.braking import TERM_NAMES, BrakingCore, RewardConfig, ScenarioConfig
 from wsp_env.core.config import RailConfig, VehicleConfig
+from wsp_env.core.sensors import EstimatorConfig, SensorConfig, WatchdogConfig
 from wsp_env.envs.rendering import render_core
 
 
@@ -171,7 +202,10 @@ class WSPBrakingEnv(gym.Env):
         valve_group: str | None = None,
         privileged: bool = False,
         accelerometer: bool = False,
-        accelerometer_bias_mps2: float = 0.05,
+        accelerometer_bias_mps2: float | None = None,
+        sensors: SensorConfig | dict | None = None,
+        estimator: EstimatorConfig | dict | None = None,
+        watchdog: WatchdogConfig | dict | None = None,
         reward: RewardConfig | dict | None = None,
         scenario: ScenarioConfig | dict | None = None,
         rails_config: str | None = None,
@@ -187,7 +221,7 @@ class WSPBrakingEnv(gym.Env):
             1, vehicle=vehicle, action_mode=action_mode, residual_scale=residual_scale,
             residual_deadband=residual_deadband, valve_group=valve_group, privileged=privileged,
             accelerometer=accelerometer, accelerometer_bias_mps2=accelerometer_bias_mps2,
-            reward=reward, scenario=scenario, rails_config=rails_config, extra_rails=extra_rails,
+            sensors=sensors, estimator=estimator, watchdog=watchdog, reward=reward, scenario=scenario, rails_config=rails_config, extra_rails=extra_rails,
             control_period_s=control_period_s, substep_s=substep_s, max_time_s=max_time_s,
         )  # fmt: skip
         self.action_space = self.core.action_space()
@@ -248,7 +282,10 @@ class WSPBrakingVectorEnv(VectorEnv):
         valve_group: str | None = None,
         privileged: bool = False,
         accelerometer: bool = False,
-        accelerometer_bias_mps2: float = 0.05,
+        accelerometer_bias_mps2: float | None = None,
+        sensors: SensorConfig | dict | None = None,
+        estimator: EstimatorConfig | dict | None = None,
+        watchdog: WatchdogConfig | dict | None = None,
         reward: RewardConfig | dict | None = None,
         scenario: ScenarioConfig | dict | None = None,
         rails_config: str | None = None,
@@ -264,7 +301,7 @@ class WSPBrakingVectorEnv(VectorEnv):
             num_envs, vehicle=vehicle, action_mode=action_mode, residual_scale=residual_scale,
             residual_deadband=residual_deadband, valve_group=valve_group, privileged=privileged,
             accelerometer=accelerometer, accelerometer_bias_mps2=accelerometer_bias_mps2,
-            reward=reward, scenario=scenario, rails_config=rails_config, extra_rails=extra_rails,
+            sensors=sensors, estimator=estimator, watchdog=watchdog, reward=reward, scenario=scenario, rails_config=rails_config, extra_rails=extra_rails,
             control_period_s=control_period_s, substep_s=substep_s, max_time_s=max_time_s,
         )  # fmt: skip
         self.num_envs = num_envs

@@ -149,3 +149,64 @@ def _build(out: Path, suite: Any, vehicle: str, results, summary, records) -> No
         )
         lines += ["", "## Side by side", "", "![comparison](plots/comparison.png)"]
     (out / "report.md").write_text("\n".join(lines) + "\n")
+
+
+def benchmark_markdown(payload: dict[str, Any]) -> str:
+    """The benchmark's tables (``wsp-env benchmark``'s JSON) as markdown: one row per policy,
+    then per scenario family the score and the worst stop ratio."""
+    lines = [
+        f"# {payload['benchmark']}: {payload['runs']} stops"
+        + ("" if payload["sealed"] else " (not the whole sealed set)"),
+        "",
+        f"Score: {payload['score_definition']}.",
+        "",
+        "| policy | score (IQM) | 95 % interval | scored stops | stop / classical, mean | "
+        "worst | pass rate | sliding energy, kJ | longest lock, s (max) | air, l | valve ops "
+        "per axle | watchdog (stops) | reference error RMS, km/h |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for name, p in payload["policies"].items():
+        sc = "-" if p["score"] is None else f"{p['score']:.3f}"
+        ci = "-" if p["score_ci95"] is None else "{:.3f} - {:.3f}".format(*p["score_ci95"])
+        lines.append(
+            f"| {name} | {sc} | {ci} | {p['scored_runs']} | {p['stop_ratio_mean']:.3f} | "
+            f"{p['stop_ratio_worst']:.2f} | {100 * p['pass_rate']:.0f} % | "
+            f"{p['sliding_energy_kJ_mean']:.0f} | {p['max_lock_s_max']:.1f} | "
+            f"{p['air_litres_mean']:.0f} | {p['valve_operations_per_axle_mean']:.1f} | "
+            f"{p['watchdog_interventions']} ({p['watchdog_runs']}) | "
+            f"{p['reference_error_rms_kmh_mean']:.2f} |"
+        )
+    oracle = payload["policies"].get("oracle", {}).get("beaten_by")
+    if oracle:
+        beats = ", ".join(f"{k} {v}" for k, v in oracle.items())
+        lines += ["", f"Stops on which a policy beat the oracle (shorter, damage criteria met): "
+                  f"{beats}."]  # fmt: skip
+    for key, title in (("rail", "rail"), ("gradient", "gradient"), ("speed", "initial speed")):
+        groups = next(iter(payload["policies"].values()))["families"][key]
+        lines += ["", f"## By {title}", "",
+                  "| policy | " + " | ".join(f"{g} (n={groups[g]['runs']})" for g in groups)
+                  + " |", "|---|" + "---|" * len(groups)]  # fmt: skip
+        for name, p in payload["policies"].items():
+            cells = []
+            for g in groups:
+                f = p["families"][key][g]
+                sc = "-" if f["score"] is None else f"{f['score']:.2f}"
+                cells.append(f"{sc} / {f['stop_ratio_worst']:.2f}")
+            lines.append(f"| {name} | " + " | ".join(cells) + " |")
+        lines.append("")
+        lines.append("Cells: score (IQM) / worst stop ratio to the classical WSP.")
+    for name, p in payload["policies"].items():
+        w = p["worst_run"]
+        lines.append(
+            f"\nWorst stop of {name}: {w['scenario']} (seed {w['seed']}), "
+            f"{w['stopping_distance_m']:.0f} m against the classical WSP's "
+            f"{w['classical_m']:.0f} m; {w['conditions']}."
+        )
+    return "\n".join(lines) + "\n"
+
+
+def write_benchmark_report(out_dir: Path, payload: dict[str, Any]) -> None:
+    """``report.md`` of a benchmark run into ``out_dir`` (a reserved temporary folder)."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    (out_dir / "report.md").write_text(benchmark_markdown(payload))

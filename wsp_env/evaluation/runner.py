@@ -71,21 +71,6 @@ def run_suite(
     records speeds and pressures of each scenario's first seed, ``"all"`` every run, ``"none"``
     nothing.
     """
-    variants = getattr(policy, "variants", None)
-    if variants is not None:  # a sweep (the oracle): every variant, the best per run
-        swept = [
-            run_suite(vehicle, suite, v, record, progress, max_time_s, env_kwargs)
-            for v in variants()
-        ]
-        results, records = [], {}
-        for candidates in zip(*(res for res, _ in swept), strict=True):
-            best = policy.choose(list(candidates))
-            j = candidates.index(best)
-            results.append({**best, "policy": policy.name, "oracle_variant": best["policy"]})
-            key = (best["scenario"], best["seed"])
-            if key in swept[j][1]:
-                records[key] = swept[j][1][key]
-        return results, records
     veh = vehicle if isinstance(vehicle, VehicleConfig) else load_vehicle(vehicle)
     runs = expand(suite, veh)
     groups: dict[int, list[int]] = {}  # runs of one vehicle share one batched core
@@ -102,7 +87,7 @@ def run_suite(
         bar = tqdm(total=len(runs), desc=f"{suite.name}: {policy.name}", unit="run", leave=False)
     for key, ids in groups.items():
         group = [runs[i] for i in ids]
-        res, rec = _run_group(vehicles[key], group, policy, record, max_time_s, env_kwargs, bar)
+        res, rec = run_runs(vehicles[key], group, policy, record, max_time_s, env_kwargs, bar)
         for i, r in zip(ids, res, strict=True):
             results[i] = r
         records.update(rec)
@@ -111,27 +96,53 @@ def run_suite(
     return results, records
 
 
-def _run_group(
+def run_runs(
     vehicle: VehicleConfig,
     runs: list[Run],
     policy: Any,
-    record: str,
-    max_time_s: float,
-    env_kwargs: dict[str, Any] | None,
-    bar: Any,
+    record: str = "none",
+    max_time_s: float = 600.0,
+    env_kwargs: dict[str, Any] | None = None,
+    bar: Any = None,
+    tier_keys: tuple[str, ...] = (),
 ) -> tuple[list[dict[str, Any]], dict[tuple[str, int], RunRecord]]:
-    """The runs of one vehicle, all environments of one batched core, stepped together."""
+    """The runs of one vehicle, all environments of one batched core, stepped together (a
+    suite's runs, ``run_suite``; the benchmark's sealed set). Each result carries the run's
+    metrics, its undiscounted ``return`` under the core's reward, the shared reference's
+    error against the train speed and the watchdog's interventions.
+
+    A policy with ``variants`` (the oracle) is a sweep: every variant runs, and per run the one
+    ``policy.choose`` picks is kept. ``tier_keys``: settings of ``env_kwargs`` that a policy's own
+    ``env_kwargs`` may not change (the benchmark's sensors, scenario, reward, watchdog)."""
+    variants = getattr(policy, "variants", None)
+    if variants is not None:  # a sweep (the oracle): every variant, the best per run
+        swept = [
+            run_runs(vehicle, runs, v, record, max_time_s, env_kwargs, None, tier_keys)
+            for v in variants()
+        ]
+        results, records = [], {}
+        for candidates in zip(*(res for res, _ in swept), strict=True):
+            best = policy.choose(list(candidates))
+            j = candidates.index(best)
+            results.append({**best, "policy": policy.name, "oracle_variant": best["policy"]})
+            key = (best["scenario"], best["seed"])
+            if key in swept[j][1]:
+                records[key] = swept[j][1][key]
+        if bar is not None:
+            bar.update(len(runs))
+        return results, records
     # a trained policy brings the settings its spaces need (action mode, valve grouping, ...)
-    kwargs = {**(env_kwargs or {}), **getattr(policy, "env_kwargs", {})}
+    own = {k: v for k, v in getattr(policy, "env_kwargs", {}).items() if k not in tier_keys}
+    kwargs = {**(env_kwargs or {}), **own}
     core = make_core(len(runs), vehicle=vehicle, max_time_s=max_time_s, **kwargs)
     for e, run in enumerate(runs):
         core.reset_env(e, run.options, seed=run.seed)
     refs = _references(core, max_time_s)
     policy.bind(core)
     policy.reset(np.arange(len(runs)))
-    estimates = getattr(policy, "reference_speed", None)
-    ref_sq = np.zeros(len(runs))  # integral of (v_ref - V)^2 dt, for policies that estimate one
+    ref_sq = np.zeros(len(runs))  # integral of (v_ref - V)^2 dt: the shared reference's error
     ref_max = np.zeros(len(runs))
+    returns = np.zeros(len(runs))
     first: dict[str, int] = {}
     for e, run in enumerate(runs):
         first.setdefault(run.scenario, e)
@@ -146,21 +157,22 @@ def _run_group(
     sim = core.sim
 
     def finish(e: int) -> dict[str, Any]:
-        ref_error = None
-        if estimates is not None:
-            duration = max(float(sim.time_s[e]), 1e-9)
-            ref_error = (3.6 * math.sqrt(ref_sq[e] / duration), 3.6 * ref_max[e])
-        return _run_result(core, e, runs[e], (*refs[e], ref_error), policy.name)
+        duration = max(float(sim.time_s[e]), 1e-9)
+        ref_error = (3.6 * math.sqrt(ref_sq[e] / duration), 3.6 * ref_max[e])
+        out = _run_result(core, e, runs[e], (*refs[e], ref_error), policy.name)
+        out["return"] = float(returns[e])
+        out["watchdog"] = core.watchdog_interventions(e)
+        return out
 
     n_steps = math.ceil(max_time_s / sim.control_period_s) + 1
     recorder.snapshot(done)
     for _ in range(n_steps):
         actions = policy.act(core.obs)
-        if estimates is not None:
-            err = np.where(done, 0.0, np.asarray(estimates(), dtype=float) - sim.speed_mps)
-            ref_sq += err * err * sim.control_period_s
-            ref_max = np.maximum(ref_max, np.abs(err))
         core.step(core.check_actions(actions))
+        err = np.where(done, 0.0, core.reference_speed_mps - sim.speed_mps)
+        ref_sq += err * err * sim.control_period_s
+        ref_max = np.maximum(ref_max, np.abs(err))
+        returns += np.where(done, 0.0, core.terms.sum(axis=1))
         recorder.snapshot(done)
         ended = np.flatnonzero(~done & core.ended())
         for e in ended:

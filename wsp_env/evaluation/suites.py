@@ -45,7 +45,8 @@ def _option(name: str) -> Any:
 # the case fields that are environment options of the same name (``expand`` passes them on)
 CASE_OPTIONS = (
     "mu_contaminated", "pattern", "load_factor", "gradient_permille", "recovery_basis",
-    "axle_mu_factor", "extra_brake_force_N", "sections",
+    "axle_mu_factor", "extra_brake_force_N", "sections", "accelerometer_bias_mps2",
+    "wheel_speed_noise_kmh",
 )  # fmt: skip
 
 
@@ -65,6 +66,9 @@ class CaseConfig:
     axle_mu_factor: tuple[float, ...] | None = _option("axle_mu_factor")
     extra_brake_force_N: float | None = _option("extra_brake_force_N")
     sections: tuple[tuple[float, ...], ...] | None = None  # checked whole in ``validate``
+    # the stop's sensor errors (core.sensors); the bias needs an accelerometer to act on
+    accelerometer_bias_mps2: float | None = _option("accelerometer_bias_mps2")
+    wheel_speed_noise_kmh: float | None = _option("wheel_speed_noise_kmh")
     criteria: dict[str, float] = field(default_factory=dict)
 
     def validate(self, where: str) -> None:

@@ -28,7 +28,8 @@ POLICY_KWARGS = (
 MANAGED = ("policy", "env", "seed", "policy_kwargs", "tensorboard_log", "verbose", "device")
 ENV_KWARGS = (
     "vehicle", "action_mode", "residual_scale", "residual_deadband", "valve_group", "privileged",
-    "accelerometer", "accelerometer_bias_mps2", "reward", "scenario", "rails_config",
+    "accelerometer", "accelerometer_bias_mps2", "sensors", "estimator", "watchdog", "reward",
+    "scenario", "rails_config",
     "control_period_s", "substep_s", "max_time_s",
 )  # fmt: skip
 SCHEDULE = re.compile(r"^lin_([0-9.eE+-]+)$")

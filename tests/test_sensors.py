@@ -1,0 +1,214 @@
+"""The sensor model, the shared reference-speed estimator and the safety watchdog
+(``wsp_env.core.sensors``, ``core.kernel``): what every controller sees and what stands between
+any controller and the valves."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from wsp_env.core import kernel as K
+from wsp_env.core.config import ConfigError
+from wsp_env.envs import WSPBrakingVectorEnv
+from wsp_env.evaluation.runner import run_one
+from wsp_env.policy import NoWSP
+
+LEVEL_DRY = {"rail": "dry", "speed_kmh": 100.0, "pattern": "uniform", "gradient_permille": 0.0,
+             "load_factor": 1.0}  # fmt: skip
+
+
+def _readings(n_steps: int, **kwargs):
+    """Wheel-speed and accelerometer readings against the truth over a dry stop, every step."""
+    venv = WSPBrakingVectorEnv(num_envs=64, **kwargs)
+    venv.reset(seed=11, options=LEVEL_DRY)
+    core = venv.core
+    wheel_err, acc_err = [], []
+    for _ in range(n_steps):
+        v0 = core.sim.speed_mps.copy()
+        venv.step(np.ones((64, 4), dtype=np.float32))
+        true_wheel = core.sim.wheel_speed_mps
+        wheel_err.append(core.measured_wheel_speed_mps - true_wheel)
+        acc_err.append(core.accelerometer_reading_mps2 - (v0 - core.sim.speed_mps) / 0.02)
+    return core, np.array(wheel_err), np.array(acc_err)
+
+
+def test_wheel_speed_noise_has_the_drawn_spread_and_no_bias():
+    """sigma 0.5 km/h per reading: the sample standard deviation over 64 stops x 200 readings x
+    4 axles within 3 % of it (the sample's own spread is 0.3 %), the mean within 0.01 km/h;
+    the readings of two axles are independent."""
+    _, err, _ = _readings(200, sensors={"wheel_speed_noise_kmh": [0.5, 0.5]})
+    err_kmh = 3.6 * err
+    assert err_kmh.std() == pytest.approx(0.5, rel=0.03)
+    assert abs(err_kmh.mean()) < 0.01
+    corr = np.corrcoef(err_kmh[:, :, 0].ravel(), err_kmh[:, :, 1].ravel())[0, 1]
+    assert abs(corr) < 0.03
+
+
+def test_wheel_speed_quantum_and_scale_error():
+    """Readings are multiples of the resolution; each axle's scale error lies within its bound
+    and shows in the reading's ratio to the truth."""
+    core, _, _ = _readings(
+        50, sensors={"wheel_speed_quantum_kmh": 0.1, "wheel_speed_scale_error": 0.01}
+    )
+    q = 0.1 / 3.6
+    meas = core.measured_wheel_speed_mps
+    assert np.allclose(meas / q, np.round(meas / q), atol=1e-6)
+    scale = core.axle_wsp[:, :, K.AW_SCALE]
+    assert np.all(np.abs(scale - 1.0) <= 0.01) and np.unique(scale).size == scale.size
+    ratio = meas / core.sim.wheel_speed_mps
+    assert np.allclose(ratio, scale, atol=q / core.sim.wheel_speed_mps.min())
+
+
+def test_accelerometer_bias_noise_and_lag_statistics():
+    """The bias is drawn per stop within +-b (uniform: its spread b / sqrt(3)); the noise's
+    spread after the 0.1 s lag is sigma sqrt(k / (2 - k)), k = 1 - exp(-dt / tau), and a fixed
+    bias option sets it exactly."""
+    b, sigma, tau = 0.3, 0.2, 0.1
+    sensors = {"accelerometer_bias_mps2": b, "accelerometer_noise_mps2": sigma,
+               "accelerometer_lag_s": tau}  # fmt: skip
+    core, _, acc = _readings(300, accelerometer=True, sensors=sensors)
+    bias = core.sensor_par[:, K.SP_ACC_BIAS]
+    assert np.all(np.abs(bias) <= b) and bias.std() == pytest.approx(b / np.sqrt(3), rel=0.25)
+    settled = acc[50:] - bias  # past the lag's start-up; the train's deceleration is steady
+    k = 1.0 - np.exp(-0.02 / tau)
+    assert settled.std(axis=0).mean() == pytest.approx(sigma * np.sqrt(k / (2 - k)), rel=0.1)
+    venv = WSPBrakingVectorEnv(num_envs=2, accelerometer=True, sensors=sensors)
+    venv.reset(seed=1, options={**LEVEL_DRY, "accelerometer_bias_mps2": -0.25})
+    assert np.all(venv.core.sensor_par[:, K.SP_ACC_BIAS] == -0.25)
+
+
+def test_same_seed_same_readings_serial_and_parallel():
+    """The noise comes from per-env generators seeded from the env's seed: the same seed gives
+    the same readings, and the 64-env parallel step draws what 1-env serial steps draw."""
+    sensors = {"wheel_speed_noise_kmh": [0.3, 0.3]}
+    big = WSPBrakingVectorEnv(num_envs=64, sensors=sensors)
+    big.reset(seed=[100 + i for i in range(64)], options=LEVEL_DRY)
+    one = WSPBrakingVectorEnv(num_envs=1, sensors=sensors)
+    one.reset(seed=[105], options=LEVEL_DRY)
+    for _ in range(20):
+        big.step(np.ones((64, 4), dtype=np.float32))
+        one.step(np.ones((1, 4), dtype=np.float32))
+    assert np.array_equal(
+        big.core.measured_wheel_speed_mps[5], one.core.measured_wheel_speed_mps[0]
+    )
+
+
+def test_the_shared_reference_is_pulled_down_when_it_drifts_above_the_train():
+    """An accelerometer reading 0.6 m/s^2 too little lets the reference drift above a train
+    whose wheels all slide (locked wheels: nothing anchors it, and it ends far above); venting
+    one axle lets its wheel spin up and roll freely, and the estimator anchors on it and comes
+    down to the train within 1 km/h (the correction the environment's reference lacked)."""
+    opts = {"rail": "soap", "speed_kmh": 120.0, "pattern": "uniform", "mu_contaminated": 0.06,
+            "gradient_permille": 0.0, "accelerometer_bias_mps2": -0.6}  # fmt: skip
+    venv = WSPBrakingVectorEnv(num_envs=1, accelerometer=True, watchdog={"enabled": False})
+    venv.reset(seed=2, options=opts)
+    core = venv.core
+    for _ in range(400):  # 8 s of locked wheels
+        venv.step(np.ones((1, 4), dtype=np.float32))
+    drift = 3.6 * (core.reference_speed_mps[0] - core.sim.speed_mps[0])
+    assert drift > 5.0
+    action = np.ones((1, 4), dtype=np.float32)
+    action[0, 3] = -1.0  # vent the last axle
+    for _ in range(250):  # a locked wheel spins up at ~8 m/s^2 on this soap: 4 s to the train
+        venv.step(action)
+    err = 3.6 * (core.reference_speed_mps[0] - core.sim.speed_mps[0])
+    assert abs(err) < 1.0, (drift, err)
+
+
+def test_the_reference_age_is_observed_and_resets_at_an_anchor():
+    venv = WSPBrakingVectorEnv(num_envs=1)
+    venv.reset(seed=2, options={"rail": "soap", "speed_kmh": 120.0, "mu_contaminated": 0.06})
+    core = venv.core
+    for _ in range(300):
+        venv.step(np.full((1, 4), 0.3, dtype=np.float32))  # working: out of apply
+    age = core.wsp[0, K.W_AGE]
+    assert age > 3.0 and core.obs[0, -1] == pytest.approx(age / 10.0, rel=1e-5)
+    action = np.full((1, 4), 0.3, dtype=np.float32)
+    action[0, 0] = -1.0
+    for _ in range(250):
+        venv.step(action)
+    assert core.wsp[0, K.W_AGE] < 0.5
+
+
+class _Vent:
+    """A policy that vents every valve for the whole stop."""
+
+    name = "vent"
+    privileged = False
+
+    def bind(self, core):
+        self.shape = (core.n_envs, core.n_valves)
+
+    def reset(self, env_ids):
+        pass
+
+    def act(self, obs):
+        return -np.ones(self.shape, dtype=np.float32)
+
+
+@pytest.mark.parametrize("rail,speed,gradient", [("soap", 100.0, 0.0), ("leaves", 100.0, 0.0),
+                                                 ("dry", 120.0, 0.0)])  # fmt: skip
+def test_the_watchdog_stops_a_policy_that_vents_forever(rail, speed, gradient):
+    """Without the watchdog a vent-forever stop runs for kilometres; with it, the minimum-
+    deceleration supervision restores the demand, and the stop is the locked-wheel stop plus
+    at most the distance run at the initial speed while the supervision waits (the demand's
+    build-up, its 3 s and the filter's 2 x 1 s). (On leaves at -20 per mille nothing stops the
+    train soon, locked wheels included: the bound holds, the contrast does not.)"""
+    case = {"gradient_permille": gradient, "mu_contaminated": None}
+    case = {k: v for k, v in case.items() if v is not None}
+    locked, _ = run_one("uic_z1", rail, speed, NoWSP(), 3, case)
+    vent, _ = run_one("uic_z1", rail, speed, _Vent(), 3, case)
+    free, _ = run_one("uic_z1", rail, speed, _Vent(), 3, case, {"watchdog": {"enabled": False}})
+    t_build = locked["equivalent_build_up_time_s"] * 2.0
+    bound = locked["stopping_distance_m"] + speed / 3.6 * (t_build + 3.0 + 2.0)
+    assert vent["stopping_distance_m"] <= bound
+    assert vent["watchdog"]["min_deceleration"] == 1
+    assert free["stopping_distance_m"] > 3.0 * vent["stopping_distance_m"]
+    assert locked["watchdog"]["total"] == 0
+
+
+def test_the_watchdog_leaves_the_classical_wsp_alone_on_the_judging_suites():
+    """The frozen classical WSP never trips it on en15595's soap runs (it is a backstop, not a
+    controller)."""
+    from wsp_env.evaluation import load_suite, run_suite
+    from wsp_env.policy import make_policy
+
+    res, _ = run_suite("uic_z1", load_suite("quick"), make_policy("classical"), record="none")
+    assert all(r["watchdog"]["total"] == 0 for r in res)
+
+
+@pytest.mark.parametrize(
+    "kwargs,needle",
+    [
+        ({"sensors": {"wheel_speed_noise_kmh": [0.5, 0.1]}}, "wheel_speed_noise_kmh"),
+        ({"sensors": {"wheel_speed_noise_kmh": [-1.0, 0.1]}}, "wheel_speed_noise_kmh"),
+        ({"sensors": {"accelerometer_lag_s": float("nan")}}, "accelerometer_lag_s"),
+        ({"sensors": {"wheel_speed_scale_error": 0.5}}, "wheel_speed_scale_error"),
+        ({"sensors": {"phonic_teeth": 80}}, "phonic_teeth"),
+        ({"watchdog": {"safety_time_s": 0.0}}, "safety_time_s"),
+        ({"watchdog": {"min_decel_mps2": -1.0}}, "min_decel_mps2"),
+        ({"estimator": {"ref_adapt_margin": 0.5}}, "ref_adapt_margin"),
+        ({"accelerometer_bias_mps2": -0.1}, "accelerometer_bias_mps2"),
+    ],
+)
+def test_bad_sensor_watchdog_and_estimator_settings_are_one_line(kwargs, needle):
+    with pytest.raises((ConfigError, ValueError)) as err:
+        WSPBrakingVectorEnv(num_envs=1, **kwargs)
+    msg = str(err.value)
+    assert needle in msg and "\n" not in msg
+
+
+@pytest.mark.parametrize(
+    "options,needle",
+    [
+        ({"accelerometer_bias_mps2": 3.0}, "accelerometer_bias_mps2"),
+        ({"accelerometer_bias_mps2": "x"}, "accelerometer_bias_mps2"),
+        ({"wheel_speed_noise_kmh": -0.1}, "wheel_speed_noise_kmh"),
+        ({"gradient_permille": 150.0}, "gradient_permille"),
+    ],
+)
+def test_bad_sensor_options_are_one_line(options, needle):
+    venv = WSPBrakingVectorEnv(num_envs=1, accelerometer=True)
+    with pytest.raises(ConfigError) as err:
+        venv.reset(seed=0, options=options)
+    assert needle in str(err.value) and "\n" not in str(err.value)

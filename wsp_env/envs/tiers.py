@@ -1,0 +1,114 @@
+"""The benchmark's registered environments: one id per vehicle and sensor tier, each fixing every
+setting a benchmark score depends on (``wsp-env benchmark``; docs/benchmark.md).
+
+Two **sensor tiers**, each with its own frozen classical WSP (``baselines.classical``
+``TIER_CONFIGS``); a controller is only ever compared with the classical WSP of its tier:
+
+* ``wheels`` — wheel-speed sensors only (``WSPBraking-UICZ1-v1``);
+* ``wheels+accel`` — plus a body accelerometer (``WSPBraking-UICZ1-Accel-v1``).
+
+What an id fixes (``benchmark_env_kwargs``): the vehicle; the sensor errors of the tier
+(``TIER_SENSORS``: wheel-speed resolution 0.05 km/h, noise sigma drawn per stop in 0-0.2 km/h,
+per-axle scale error within +-0.5 %; the accelerometer's bias within +-0.3 m/s^2, noise sigma
+0.05 m/s^2 per reading, 0.1 s lag); the shared estimator and the safety watchdog at their
+defaults; the scenario distribution of the real world's range (``BENCHMARK_SCENARIO``: every rail
+of ``configs/rails.yaml`` including ``soap_etr1000``, their patterns and levels, speeds from
+40 km/h to the vehicle's maximum, gradients within +-25 per mille, loads tare to laden, pad
+friction +-15 %, 70 % emergency and 30 % service demand); the default reward; a 20 ms control
+period, 1 ms substeps and a 600 s time limit.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+from wsp_env import BENCHMARK_VEHICLES
+from wsp_env.core.braking import ScenarioConfig
+from wsp_env.core.sensors import SensorConfig
+from wsp_env.envs.wsp_braking import WSPBrakingEnv, WSPBrakingVectorEnv
+
+TIERS = ("wheels", "wheels+accel")
+VERSION = "v1"
+
+_WHEELS = SensorConfig(
+    wheel_speed_noise_kmh=(0.0, 0.2),
+    wheel_speed_quantum_kmh=0.05,
+    wheel_speed_scale_error=0.005,
+    accelerometer_bias_mps2=0.0,
+)
+TIER_SENSORS: dict[str, SensorConfig] = {
+    "wheels": _WHEELS,
+    "wheels+accel": dataclasses.replace(
+        _WHEELS,
+        accelerometer_bias_mps2=0.3,
+        accelerometer_noise_mps2=0.05,
+        accelerometer_lag_s=0.1,
+    ),
+}
+BENCHMARK_SCENARIO = ScenarioConfig(
+    speed_kmh=None,  # 40 km/h to the vehicle's maximum
+    rails={
+        "dry": 0.1,
+        "wet": 0.15,
+        "soap": 0.25,
+        "soap_etr1000": 0.1,
+        "oil": 0.15,
+        "leaves": 0.25,
+    },
+    load_factor=(0.85, 1.15),
+    pad_factor=(0.85, 1.15),
+    gradient_permille=(-25.0, 25.0),
+    emergency_probability=0.7,
+    service_demand_fraction=0.85,
+)
+MAX_TIME_S = 600.0
+
+
+def check_tier(tier: str) -> str:
+    if tier not in TIERS:
+        raise ValueError(f"tier: {tier!r} is not one of {', '.join(TIERS)}")
+    return tier
+
+
+def benchmark_env_kwargs(vehicle: str, tier: str) -> dict[str, Any]:
+    """Every environment argument of the benchmark id of ``vehicle`` and ``tier``."""
+    check_tier(tier)
+    if vehicle not in BENCHMARK_VEHICLES:
+        raise ValueError(
+            f"vehicle: {vehicle!r} has no benchmark id (known: {', '.join(BENCHMARK_VEHICLES)})"
+        )
+    return {
+        "vehicle": vehicle,
+        "accelerometer": tier == "wheels+accel",
+        "sensors": dataclasses.asdict(TIER_SENSORS[tier]),
+        "estimator": None,
+        "watchdog": None,
+        "reward": None,
+        "scenario": dataclasses.asdict(BENCHMARK_SCENARIO),
+        "control_period_s": 0.02,
+        "substep_s": 1e-3,
+        "max_time_s": MAX_TIME_S,
+    }
+
+
+def env_id(vehicle: str, tier: str) -> str:
+    """``WSPBraking-UICZ1-v1`` (tier ``wheels``), ``-Accel-v1`` (tier ``wheels+accel``)."""
+    check_tier(tier)
+    accel = "-Accel" if tier == "wheels+accel" else ""
+    return f"WSPBraking-{BENCHMARK_VEHICLES[vehicle]}{accel}-{VERSION}"
+
+
+def make_benchmark_env(vehicle: str, tier: str, render_mode: str | None = None) -> WSPBrakingEnv:
+    """The registered single environment of ``vehicle`` and ``tier``."""
+    return WSPBrakingEnv(render_mode=render_mode, **benchmark_env_kwargs(vehicle, tier))
+
+
+def make_benchmark_vector_env(
+    num_envs: int, vehicle: str, tier: str, render_mode: str | None = None, **_: Any
+) -> WSPBrakingVectorEnv:
+    """The registered native vector environment of ``vehicle`` and ``tier`` (gymnasium's
+    ``max_episode_steps`` is ignored: the id's time limit holds)."""
+    return WSPBrakingVectorEnv(
+        num_envs=num_envs, render_mode=render_mode, **benchmark_env_kwargs(vehicle, tier)
+    )
