@@ -24,7 +24,7 @@ The three tasks of a WSP (seed 002 Fig. 6), as a WSP engineer would set them up:
 Plus **periodic release** (when the reference has gone ``periodic_release_interval_s`` without
 an anchor while the WSP works, and as long since the last release began, one axle in turn
 from the last is vented for at least ``periodic_release_duration_s`` and on until it stops
-spinning up, at most ``periodic_release_max_s``: the estimator then anchors on it) and the
+spinning up, at most ``periodic_release_max_s``: the estimator anchors on it) and the
 **safety timer**: an axle venting continuously for longer than ``safety_timer_s`` gets the full
 demand back until standstill (EN 15595 §5.1.4 "WSP watchdog"; Open Rails uses 7 s; the
 environment's own watchdog, ``core.sensors.WatchdogConfig``, stands behind it for every
@@ -193,7 +193,8 @@ class ClassicalWSP:
         if self.releasing.any():
             rows = self._rows[self.releasing]
             axle = self.release_axle[self.releasing]
-            # run at least the minimum time, then until the wheel has stopped spinning up
+            # run at least the minimum time, then until the wheel has stopped spinning up (the
+            # estimator anchors on it then)
             still = (self.release_left[self.releasing] > 0) | (
                 -decel[rows, axle] > cfg.release_accel_done_mps2
             )

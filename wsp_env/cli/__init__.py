@@ -269,6 +269,8 @@ def cmd_simulate(args: argparse.Namespace) -> dict[str, Any]:
         "seed": args.seed,
         "mu_contaminated": conditions["mu_contaminated"],
         "pattern_sections": conditions["sections"],
+        "gradient_permille": conditions["gradient_permille"],
+        "sensors": conditions["sensors"],
         **{k: v for k, v in run.items() if k not in ("scenario", "seed", "policy", "conditions")},
     }
     outputs = []

@@ -149,7 +149,10 @@ AW_SCALE = 1  # the wheel-speed sensor's scale (1 + error, drawn per stop)
 AW_RELEASED_FOR = 2  # s the cylinder has been below OP_FREE_ROLL_BAR
 AW_WD_RELEASED_FOR = 3  # s the axle has been released (watchdog)
 AW_WD_RESTORED = 4  # 1.0 once the watchdog has given the axle its demand back
-N_AW = 5
+AW_VENT_FOR = 5  # s the axle's valve has vented without a break
+AW_VENT_ROLLING = 6  # 1.0: the wheel rolled with the reference when this vent began
+AW_SPUN_UP = 7  # 1.0: the wheel has spun up since this vent began
+N_AW = 8
 
 OBS_CLIP = 5.0
 MODE_CONTINUOUS = 0
@@ -245,8 +248,8 @@ def update_reference(
     """The WSP's reference speed after one period — one estimator for every controller.
 
     ``wheel``: measured wheel speeds (m/s), ``decel``: their decelerations over the period,
-    ``pressure``: cylinder pressures (bar), ``vented``: the valve command of the period was a
-    full release, ``demand``: the demand (bar), ``active``: the WSP works (a valve out of
+    ``pressure``: cylinder pressures (bar), ``vented``: the axle's valve vented in the period,
+    ``demand``: the demand (bar), ``active``: the WSP works (a valve out of
     apply, or a wheel slipping more than ``OP_ACTIVE_SLIP`` / ``OP_ACTIVE_SLIP_REL``, at the
     period's start). It follows the fastest wheel; when every wheel may slide it must not
     follow them down: without an accelerometer it falls at most at ``OP_REF_DECEL_LIMIT``, and
@@ -256,8 +259,7 @@ def update_reference(
     both ways: a wheel whose cylinder has been below ``OP_FREE_ROLL_BAR`` for
     ``OP_FREE_ROLL_S`` and which no longer spins up rolls with the train, and the reference is
     set to it, up or down (the periodic release is how a WSP makes one). A wheel slowing faster
-    than ``OP_REF_DECEL_LIMIT`` (faster than any train) is not free: it may be sliding deeper
-    while its cylinder vents."""
+    than ``OP_REF_DECEL_LIMIT`` (faster than any train) is not free."""
     n_axles = wheel.shape[0]
     fastest = 0.0
     for k in range(n_axles):
@@ -273,15 +275,33 @@ def update_reference(
     wsp[e, W_ACTIVE] = 1.0 if active else 0.0
     # anchors: a wheel rolling freely with the train
     anchor = -1.0
+    v_ref_old = wsp[e, W_VREF]
+    band = max(obs_par[OP_ACTIVE_SLIP], obs_par[OP_ACTIVE_SLIP_REL] * v_ref_old)
     for k in range(n_axles):
-        if pressure[k] < obs_par[OP_FREE_ROLL_BAR] or vented[k]:
+        if pressure[k] < obs_par[OP_FREE_ROLL_BAR]:
             axle_wsp[e, k, AW_RELEASED_FOR] += dt
         else:
             axle_wsp[e, k, AW_RELEASED_FOR] = 0.0
-        # no longer spinning up, nor slowing faster than any train decelerates (a wheel whose
-        # valve vents but whose cylinder still brakes may be sliding deeper)
+        if vented[k]:
+            if axle_wsp[e, k, AW_VENT_FOR] == 0.0:  # a vent begins: was the wheel rolling?
+                rolling = (
+                    v_ref_old - (wheel[k] + decel[k] * dt) <= band
+                    and decel[k] < obs_par[OP_REF_DECEL_LIMIT]
+                )
+                axle_wsp[e, k, AW_VENT_ROLLING] = 1.0 if rolling else 0.0
+                axle_wsp[e, k, AW_SPUN_UP] = 0.0
+            axle_wsp[e, k, AW_VENT_FOR] += dt
+            if -decel[k] > obs_par[OP_FREE_ROLL_ACCEL]:
+                axle_wsp[e, k, AW_SPUN_UP] = 1.0
+        else:
+            axle_wsp[e, k, AW_VENT_FOR] = 0.0
+        off = axle_wsp[e, k, AW_RELEASED_FOR] >= obs_par[OP_FREE_ROLL_S] - 1e-9 or (
+            axle_wsp[e, k, AW_VENT_FOR] >= obs_par[OP_FREE_ROLL_S] - 1e-9
+            and (axle_wsp[e, k, AW_VENT_ROLLING] > 0.0 or axle_wsp[e, k, AW_SPUN_UP] > 0.0)
+        )
+        # no longer spinning up, nor slowing faster than any train decelerates
         free = (
-            axle_wsp[e, k, AW_RELEASED_FOR] >= obs_par[OP_FREE_ROLL_S] - 1e-9
+            off
             and -decel[k] < obs_par[OP_FREE_ROLL_ACCEL]
             and decel[k] < obs_par[OP_REF_DECEL_LIMIT]
         )
@@ -454,6 +474,9 @@ def reset_obs(
         axle_wsp[e, k, AW_RELEASED_FOR] = 0.0
         axle_wsp[e, k, AW_WD_RELEASED_FOR] = 0.0
         axle_wsp[e, k, AW_WD_RESTORED] = 0.0
+        axle_wsp[e, k, AW_VENT_FOR] = 0.0
+        axle_wsp[e, k, AW_VENT_ROLLING] = 0.0
+        axle_wsp[e, k, AW_SPUN_UP] = 0.0
     fastest = 0.0
     for k in range(axle_par.shape[1]):
         fastest = max(fastest, axle_wsp[e, k, AW_WHEEL])
@@ -484,7 +507,7 @@ def estimate_and_supervise(
     """After a period, from the sensors' readings (``AW_WHEEL``, ``W_ACC``) and the cylinder
     pressures (bar): the reference speed and the watchdog's timers. One implementation for the
     kernel and for a vehicle outside it (the rig, ``BrakingCore.observe_external``); ``cmd``:
-    the valve commands of the period (a full release is 0)."""
+    the valve commands of the period (the watchdog's safety time counts vents)."""
     n_axles = pressure.shape[0]
     wheel = np.empty(n_axles)
     decel = np.empty(n_axles)
