@@ -159,11 +159,10 @@ def test_benchmark_runs_policies_through_one_path_and_refuses_a_foreign_tier(
     assert "watchdog_interventions" in pols["half"]
     assert (tmp_path / "rep" / "report.md").read_text().startswith("# WSPBraking-UICZ1-v1")
 
-    class Accel(_Half):
-        env_kwargs = {"accelerometer": True}
-
+    accel = _Half()
+    accel.env_kwargs = {"accelerometer": True}  # as a model trained with one says
     with pytest.raises(ValueError, match="belongs to tier wheels\\+accel"):
-        run_benchmark([Accel()], "uic_z1", "wheels", runs=2)
+        run_benchmark([accel], "uic_z1", "wheels", runs=2)
 
 
 @pytest.mark.parametrize(
