@@ -36,6 +36,7 @@ import argparse
 import collections
 import json
 import math
+import multiprocessing
 import os
 import sys
 import tempfile
@@ -138,7 +139,8 @@ def scaled_effect(
 
 def _run_one(job: dict[str, Any]) -> dict[str, Any]:
     """Generate one trace, write it, read it back and run the loop (in a worker process)."""
-    os.environ.setdefault("NUMBA_NUM_THREADS", "1")
+    if multiprocessing.parent_process() is not None:  # a worker: one thread each; never the
+        os.environ.setdefault("NUMBA_NUM_THREADS", "1")  # caller's process (its threads run)
     from wsp_env.calibration import independent as ind
     from wsp_env.calibration.discovery import discover
     from wsp_env.calibration.traces import read_trace

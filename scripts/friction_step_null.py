@@ -26,6 +26,7 @@ traces read with the right sign: the best such a reading could do.
 from __future__ import annotations
 
 import argparse
+import multiprocessing
 import os
 import sys
 import tempfile
@@ -83,7 +84,8 @@ def step_reading(trace: Trace) -> dict[str, float] | None:
 
 
 def run_job(job: dict[str, Any]) -> dict[str, Any]:
-    os.environ.setdefault("NUMBA_NUM_THREADS", "1")
+    if multiprocessing.parent_process() is not None:  # a worker: one thread each; never the
+        os.environ.setdefault("NUMBA_NUM_THREADS", "1")  # caller's process (its threads run)
     from wsp_env.calibration import independent as ind
     from wsp_env.calibration.traces import read_trace
 
