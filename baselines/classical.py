@@ -24,7 +24,8 @@ The three tasks of a WSP (seed 002 Fig. 6), as a WSP engineer would set them up:
 Plus **periodic release** (when the reference has gone ``periodic_release_interval_s`` without
 an anchor while the WSP works, and as long since the last release began, one axle in turn
 from the last is vented for at least ``periodic_release_duration_s`` and on until it stops
-spinning up, at most ``periodic_release_max_s``: the estimator anchors on it) and the
+spinning up and the estimator has anchored on it — the observed age falls — at most
+``periodic_release_max_s``) and the
 **safety timer**: an axle venting continuously for longer than ``safety_timer_s`` gets the full
 demand back until standstill (EN 15595 §5.1.4 "WSP watchdog"; Open Rails uses 7 s; the
 environment's own watchdog, ``core.sensors.WatchdogConfig``, stands behind it for every
@@ -81,6 +82,8 @@ TIER_CONFIGS = {"wheels": "classical.yaml", "wheels+accel": "classical_accel.yam
 def load_wsp_config(path: str | Path | None = None, tier: str = "wheels") -> WSPConfig:
     """Load thresholds (by default the frozen file of sensor ``tier``, ``TIER_CONFIGS``);
     errors name file and field."""
+    if tier not in TIER_CONFIGS:
+        raise ValueError(f"tier: {tier!r} is not one of {', '.join(TIER_CONFIGS)}")
     p = Path(path) if path is not None else configs_root() / "wsp" / TIER_CONFIGS[tier]
     try:
         return from_dict(WSPConfig, read_yaml(p) or {})
@@ -193,10 +196,12 @@ class ClassicalWSP:
         if self.releasing.any():
             rows = self._rows[self.releasing]
             axle = self.release_axle[self.releasing]
-            # run at least the minimum time, then until the wheel has stopped spinning up (the
-            # estimator anchors on it then)
-            still = (self.release_left[self.releasing] > 0) | (
-                -decel[rows, axle] > cfg.release_accel_done_mps2
+            # run at least the minimum time, then until the wheel has stopped spinning up and
+            # the estimator has anchored on it (the observed age fell below the release's time)
+            still = (
+                (self.release_left[self.releasing] > 0)
+                | (-decel[rows, axle] > cfg.release_accel_done_mps2)
+                | (age[rows] >= self.release_time[self.releasing])
             )
             still &= self.release_time[self.releasing] < cfg.periodic_release_max_s
             state[rows[still], axle[still]] = VENT

@@ -121,12 +121,13 @@ def test_undeclared_effect_is_named(tmp_path, effect, category, check, seed=0):
             ("factor_beyond_step", 0.06 / 0.107, 0.15),
         ),
         # soap, the same levels: beyond the step the wheels slide more and recover more, so the
-        # effective level falls less than the as-laid one (measured factor 0.73-0.75 against
-        # 0.56 over seeds 0-5, 0.70-0.74 before the shared estimator)
+        # effective level falls less than the as-laid one: measured factor 0.71-0.81 against
+        # 0.56 over seeds 0-5 (found on 4), 0.70-0.74 before the shared estimator (on 6); held
+        # to the as-laid ratio x 1.3, within 0.2 (the recovery's share is the trace's, not a law)
         (
             {"sections": OIL_STEP, "mu_contaminated": 0.06},
             "adhesion_position",
-            ("factor_beyond_step", 0.06 / 0.107, 0.35),
+            ("factor_beyond_step", 1.3 * 0.06 / 0.107, 0.2),
         ),
     ],
 )

@@ -390,8 +390,12 @@ def load_callable_policy(spec: str) -> Any:
     (an object with ``bind`` / ``reset`` / ``act``, ``Policy``), so that a controller from any
     framework can be evaluated. Every failure is one line naming ``spec``."""
     import importlib
+    import os
+    import sys
 
     module_name, _, attr = spec.partition(":")
+    if os.getcwd() not in sys.path:  # a module in the current folder, as `python -m` finds it
+        sys.path.append(os.getcwd())
     if not module_name or not attr:
         raise ValueError(f"policy: {spec!r} is not module:callable")
     try:

@@ -524,9 +524,11 @@ class BrakingCore:
     ) -> None:
         """Write env ``e``'s observation from sensors outside the kernel: the wheel speeds and
         cylinder pressures a rig measures, and the vehicle deceleration over the last period
-        (``None`` on the first period: nothing is advanced). The reference speed and the
-        watchdog advance as in the kernel (``kernel.estimate_and_supervise``, the same code);
-        the previous period's wheel speeds give the observed decelerations."""
+        (``None`` on the first period: nothing is advanced). The readings are the rig's own
+        (no sensor model is added: an accelerometer reads the deceleration, the gradient's part
+        and the stop's bias); the reference speed and the watchdog advance as in the kernel
+        (``kernel.estimate_and_supervise``, the same code); the previous period's wheel speeds
+        give the observed decelerations."""
         sim = self.sim
         self.axle_wsp[e, :, K.AW_WHEEL] = wheel_speed_mps
         if decel_mps2 is not None:
@@ -593,6 +595,12 @@ class BrakingCore:
         """Restore ``state_dict``'s content into this core (same vehicle and ``n_envs``)."""
         if state["n_envs"] != self.n_envs:
             raise ValueError(f"state: {state['n_envs']} environments, this core has {self.n_envs}")
+        missing = [k for k in self._STATE_ARRAYS if k not in state["core"]]
+        if missing:  # a checkpoint from before the sensor model (2026-11-25)
+            raise ValueError(
+                f"state: no {', '.join(missing)} (saved before the sensor model and the shared "
+                "reference estimator existed: resume it with the version that wrote it)"
+            )
         for k in self._STATE_ARRAYS:
             getattr(self, k)[...] = state["core"][k]
         for k in self._SIM_ARRAYS:

@@ -20,6 +20,7 @@ from wsp_env.physics.layout import (
     AA_AIR_L,
     AA_SLIDE_E,
     AA_SLIDE_T,
+    AP_P_THRESH,
     AP_RADIUS,
     AS_CMD,
     AS_MU_LEVEL,
@@ -150,8 +151,8 @@ AW_RELEASED_FOR = 2  # s the cylinder has been below OP_FREE_ROLL_BAR
 AW_WD_RELEASED_FOR = 3  # s the axle has been released (watchdog)
 AW_WD_RESTORED = 4  # 1.0 once the watchdog has given the axle its demand back
 AW_VENT_FOR = 5  # s the axle's valve has vented without a break
-AW_VENT_ROLLING = 6  # 1.0: the wheel rolled with the reference when this vent began
-AW_SPUN_UP = 7  # 1.0: the wheel has spun up since this vent began
+AW_SPARE = 6  # unused
+AW_VENT_MIN = 7  # m/s, the lowest reading since this vent began
 N_AW = 8
 
 OBS_CLIP = 5.0
@@ -243,12 +244,14 @@ def measure_acceleration(e, train_decel, env_par, sensor_par, wsp, rng, ctrl_dt)
 
 @njit(**INLINE_FLAGS)
 def update_reference(
-    e, t, wheel, decel, pressure, vented, demand, active, wsp, axle_wsp, obs_par, dt
+    e, t, wheel, decel, pressure, free_bar, vented, demand, active, wsp, axle_wsp, obs_par, dt
 ):
     """The WSP's reference speed after one period — one estimator for every controller.
 
     ``wheel``: measured wheel speeds (m/s), ``decel``: their decelerations over the period,
-    ``pressure``: cylinder pressures (bar), ``vented``: the axle's valve vented in the period,
+    ``pressure``: cylinder pressures (bar), ``free_bar``: per axle, the pressure below which its
+    brake is off (``OP_FREE_ROLL_BAR``, or the brake's threshold where higher), ``vented``: the
+    axle's valve vented in the period,
     ``demand``: the demand (bar), ``active``: the WSP works (a valve out of
     apply, or a wheel slipping more than ``OP_ACTIVE_SLIP`` / ``OP_ACTIVE_SLIP_REL``, at the
     period's start). It follows the fastest wheel; when every wheel may slide it must not
@@ -278,26 +281,22 @@ def update_reference(
     v_ref_old = wsp[e, W_VREF]
     band = max(obs_par[OP_ACTIVE_SLIP], obs_par[OP_ACTIVE_SLIP_REL] * v_ref_old)
     for k in range(n_axles):
-        if pressure[k] < obs_par[OP_FREE_ROLL_BAR]:
+        if pressure[k] < free_bar[k]:
             axle_wsp[e, k, AW_RELEASED_FOR] += dt
         else:
             axle_wsp[e, k, AW_RELEASED_FOR] = 0.0
         if vented[k]:
-            if axle_wsp[e, k, AW_VENT_FOR] == 0.0:  # a vent begins: was the wheel rolling?
-                rolling = (
-                    v_ref_old - (wheel[k] + decel[k] * dt) <= band
-                    and decel[k] < obs_par[OP_REF_DECEL_LIMIT]
-                )
-                axle_wsp[e, k, AW_VENT_ROLLING] = 1.0 if rolling else 0.0
-                axle_wsp[e, k, AW_SPUN_UP] = 0.0
+            if axle_wsp[e, k, AW_VENT_FOR] == 0.0:  # a vent begins
+                axle_wsp[e, k, AW_VENT_MIN] = wheel[k]
             axle_wsp[e, k, AW_VENT_FOR] += dt
-            if -decel[k] > obs_par[OP_FREE_ROLL_ACCEL]:
-                axle_wsp[e, k, AW_SPUN_UP] = 1.0
+            axle_wsp[e, k, AW_VENT_MIN] = min(axle_wsp[e, k, AW_VENT_MIN], wheel[k])
         else:
             axle_wsp[e, k, AW_VENT_FOR] = 0.0
+        # spun up: risen by more than the working band above its lowest reading of the vent
+        # (lasting evidence: a wheel-speed sensor's noise is far below the band)
+        spun_up = wheel[k] - axle_wsp[e, k, AW_VENT_MIN] > band
         off = axle_wsp[e, k, AW_RELEASED_FOR] >= obs_par[OP_FREE_ROLL_S] - 1e-9 or (
-            axle_wsp[e, k, AW_VENT_FOR] >= obs_par[OP_FREE_ROLL_S] - 1e-9
-            and (axle_wsp[e, k, AW_VENT_ROLLING] > 0.0 or axle_wsp[e, k, AW_SPUN_UP] > 0.0)
+            axle_wsp[e, k, AW_VENT_FOR] >= obs_par[OP_FREE_ROLL_S] - 1e-9 and spun_up
         )
         # no longer spinning up, nor slowing faster than any train decelerates
         free = (
@@ -343,23 +342,31 @@ def watchdog_commands(e, cmd, wsp, axle_wsp, obs_par):
 
 
 @njit(**INLINE_FLAGS)
-def watchdog_update(e, cmd, wheel, demand, full_demand, wsp, axle_wsp, obs_par, dt):
+def watchdog_update(
+    e, cmd, wheel, pressure, demand, full_demand, env_par, wsp, axle_wsp, obs_par, dt
+):
     """Advance the watchdog's timers after a period (EN 15595's WSP watchdog and a
     minimum-deceleration supervision, outside the controller).
 
-    **Safety time**: an axle whose valve command asks for less than ``OP_WD_RELEASE_FRACTION``
-    of the demand (a vent; a hold keeps what the cylinder has and is not a release) for longer
-    than ``OP_WD_SAFETY_S`` is restored. **Minimum deceleration**: the deceleration of the
-    fastest wheel, filtered twice (speed, then its derivative, ``OP_WD_DECEL_TAU`` each: a
-    wheel-speed sensor's noise is gone, a trend of 0.1 m/s^2 is not), below ``OP_WD_MIN_DECEL``
-    for ``OP_WD_MIN_DECEL_S`` while the full demand stands and every wheel grips (none slips
-    beyond the estimator's working band, so the fastest wheel is the train) overrides every
-    release: the brakes are being withheld, not the rail giving out."""
+    **Safety time**: an axle released — its valve asking for less than
+    ``OP_WD_RELEASE_FRACTION`` of the demand (a vent), or its cylinder below that fraction of the
+    full pressure (its brake off, however the valve got it there) — for longer than
+    ``OP_WD_SAFETY_S`` is restored. A hold at a pressure that brakes is no release.
+    **Minimum deceleration**: the deceleration of the fastest wheel, filtered twice (speed,
+    then its derivative, ``OP_WD_DECEL_TAU`` each: a wheel-speed sensor's noise is gone, a trend
+    of 0.1 m/s^2 is not), less the gradient's part (``EP_GRADE_ACC``: the supervision judges
+    what the brakes do, so a steep downhill on leaves does not trip it), below
+    ``OP_WD_MIN_DECEL`` for ``OP_WD_MIN_DECEL_S`` while the full demand stands and every wheel
+    grips (none slips beyond the estimator's working band, so the fastest wheel is the train)
+    overrides every release: the brakes are being withheld, not the rail giving out."""
     if obs_par[OP_WD_ON] <= 0.0:
         return
     n_axles = wheel.shape[0]
     for k in range(n_axles):
-        if demand > 0.0 and 0.0 <= cmd[e, k] < obs_par[OP_WD_RELEASE_FRACTION]:
+        low = obs_par[OP_WD_RELEASE_FRACTION]
+        vent = 0.0 <= cmd[e, k] < low
+        off = pressure[k] < low * env_par[e, EP_P_MAX]
+        if demand > 0.0 and (vent or off):
             axle_wsp[e, k, AW_WD_RELEASED_FOR] += dt
         else:
             axle_wsp[e, k, AW_WD_RELEASED_FOR] = 0.0
@@ -382,7 +389,8 @@ def watchdog_update(e, cmd, wheel, demand, full_demand, wsp, axle_wsp, obs_par, 
     for k in range(n_axles):
         if v_ref - wheel[k] > band:
             grip = False
-    if full_demand and grip and fastest > 1.5 and wsp[e, W_DECEL] < floor:
+    braking = wsp[e, W_DECEL] - env_par[e, EP_GRADE_ACC]  # what the brakes (and drag) do
+    if full_demand and grip and fastest > 1.5 and braking < floor:
         wsp[e, W_LOW_FOR] += dt
     else:
         wsp[e, W_LOW_FOR] = 0.0
@@ -475,8 +483,7 @@ def reset_obs(
         axle_wsp[e, k, AW_WD_RELEASED_FOR] = 0.0
         axle_wsp[e, k, AW_WD_RESTORED] = 0.0
         axle_wsp[e, k, AW_VENT_FOR] = 0.0
-        axle_wsp[e, k, AW_VENT_ROLLING] = 0.0
-        axle_wsp[e, k, AW_SPUN_UP] = 0.0
+        axle_wsp[e, k, AW_VENT_MIN] = 0.0
     fastest = 0.0
     for k in range(axle_par.shape[1]):
         fastest = max(fastest, axle_wsp[e, k, AW_WHEEL])
@@ -502,7 +509,19 @@ def reset_obs(
 
 @njit(**KERNEL_FLAGS)
 def estimate_and_supervise(
-    e, t, pressure, cmd, env_par, wsp, axle_wsp, prev_wheel, prev_action, obs_par, ctrl_dt, mode
+    e,
+    t,
+    pressure,
+    cmd,
+    env_par,
+    axle_par,
+    wsp,
+    axle_wsp,
+    prev_wheel,
+    prev_action,
+    obs_par,
+    ctrl_dt,
+    mode,
 ):
     """After a period, from the sensors' readings (``AW_WHEEL``, ``W_ACC``) and the cylinder
     pressures (bar): the reference speed and the watchdog's timers. One implementation for the
@@ -512,10 +531,15 @@ def estimate_and_supervise(
     wheel = np.empty(n_axles)
     decel = np.empty(n_axles)
     vented = np.empty(n_axles, dtype=np.bool_)
+    demand_now = demand_bar(env_par, e, t)
+    free_bar = np.empty(n_axles)
     for k in range(n_axles):
         wheel[k] = axle_wsp[e, k, AW_WHEEL]
         decel[k] = (prev_wheel[e, k] - wheel[k]) / ctrl_dt
-        vented[k] = cmd[e, k] == 0.0
+        # a vent: a target below the free-rolling pressure (a hold, CMD_HOLD < 0, is none)
+        free_bar[k] = max(obs_par[OP_FREE_ROLL_BAR], axle_par[e, k, AP_P_THRESH])
+        target = cmd[e, k] * demand_now
+        vented[k] = cmd[e, k] >= 0.0 and demand_now > free_bar[k] and target < free_bar[k]
     # the WSP works: a valve was out of apply in the period, or a wheel slipped at its start
     active = False
     for j in range(prev_action.shape[1]):
@@ -528,10 +552,11 @@ def estimate_and_supervise(
             active = True
     demand = demand_bar(env_par, e, t)
     update_reference(
-        e, t, wheel, decel, pressure, vented, demand, active, wsp, axle_wsp, obs_par, ctrl_dt
-    )
+        e, t, wheel, decel, pressure, free_bar, vented, demand, active, wsp, axle_wsp, obs_par,
+        ctrl_dt,
+    )  # fmt: skip
     full = t >= env_par[e, EP_DEMAND_DELAY] + env_par[e, EP_DEMAND_RISE]
-    watchdog_update(e, cmd, wheel, demand, full, wsp, axle_wsp, obs_par, ctrl_dt)
+    watchdog_update(e, cmd, wheel, pressure, demand, full, env_par, wsp, axle_wsp, obs_par, ctrl_dt)
 
 
 @njit(**KERNEL_FLAGS)
@@ -564,8 +589,8 @@ def sense_and_estimate(
     if obs_par[OP_ACCELEROMETER] > 0.0:
         measure_acceleration(e, train_decel, env_par, sensor_par, wsp, rng, ctrl_dt)
     estimate_and_supervise(
-        e, t, pressure, cmd, env_par, wsp, axle_wsp, prev_wheel, prev_action, obs_par, ctrl_dt,
-        mode,
+        e, t, pressure, cmd, env_par, axle_par, wsp, axle_wsp, prev_wheel, prev_action, obs_par,
+        ctrl_dt, mode,
     )  # fmt: skip
 
 
@@ -750,6 +775,7 @@ def estimate_external(
     """``estimate_and_supervise`` on the bundles, for readings written from outside the kernel
     (``AW_WHEEL``: a rig's wheel speeds)."""
     estimate_and_supervise(
-        e, t_s, np.ascontiguousarray(pressure_bar, dtype=np.float64), s.cmd, p.env_par, s.wsp,
-        s.axle_wsp, s.prev_wheel, s.prev_action, p.obs_par, control_period_s, mode,
+        e, t_s, np.ascontiguousarray(pressure_bar, dtype=np.float64), s.cmd, p.env_par,
+        p.axle_par, s.wsp, s.axle_wsp, s.prev_wheel, s.prev_action, p.obs_par, control_period_s,
+        mode,
     )  # fmt: skip

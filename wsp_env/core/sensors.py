@@ -21,14 +21,16 @@ in the compiled step, ``core.kernel``):
   the estimator became the environment's.
 * :class:`WatchdogConfig` — the **safety watchdog** outside the controller, as EN 15595
   requires of a WSP and as a brake control unit implements apart from its control logic: an
-  axle whose valve keeps asking for less than ``release_fraction`` of the demand (a vent: a
-  hold keeps the pressure the cylinder has and is not a release) for longer than
+  axle released — its valve asking for less than ``release_fraction`` of the demand (a vent),
+  or its cylinder below that fraction of the full pressure (its brake off, however the valve got
+  it there; a hold at a pressure that brakes is no release) — for longer than
   ``safety_time_s`` gets the full demand back until standstill; a **minimum-deceleration
   supervision** overrides every release until standstill once the deceleration the sensors
-  measure (the fastest wheel's, filtered over ``decel_filter_s``) has stayed below
-  ``min_decel_mps2`` for ``min_decel_time_s`` while the full demand stands and every wheel
-  grips (none slips beyond the estimator's working band): the brakes are being withheld, not
-  the rail giving out. Its interventions are counted (``BrakingCore.watchdog_interventions``).
+  measure (the fastest wheel's, filtered over ``decel_filter_s``), less the gradient's part
+  (the supervision judges what the brakes do; the line's gradient is known to it), has stayed
+  below ``min_decel_mps2`` for ``min_decel_time_s`` while the full demand stands and every
+  wheel grips (none slips beyond the estimator's working band): the brakes are being withheld,
+  not the rail giving out. Its interventions are counted (``BrakingCore.watchdog_interventions``).
 """
 
 from __future__ import annotations
@@ -102,12 +104,13 @@ class WatchdogConfig:
     # EN 15595 bounds continuous release; the classical WSP's own safety timer is 7 s, so the
     # independent watchdog is a backstop behind it
     safety_time_s: float = field(default=10.0, metadata={"gt": 0.0, "le": 60.0})
-    # a command below 5 % of the demand is a vent (the cylinder ends under the brake's
-    # threshold); the frozen classical WSP holds down to ~15 % on leaves, which is braking
+    # a command below 5 % of the demand is a vent, a cylinder below 5 % of the full pressure
+    # (~0.19 bar) is under the brake's threshold; the frozen classical WSP holds down to ~15 %
+    # on leaves, which is braking
     release_fraction: float = field(default=0.05, metadata={"gt": 0.0, "le": 1.0})
-    # the floor: below what the lowest adhesion the scenarios hold (leaves, mu 0.025) gives
-    # with gripping wheels on level track (about 0.2 m/s^2), above what a train with its brakes
-    # released decelerates by running resistance (< 0.1 m/s^2); 0 switches the supervision off
+    # the floor, on the brakes' share of the deceleration (gradient removed): below what the
+    # lowest adhesion the scenarios hold (leaves, mu 0.025) gives with gripping wheels (about
+    # 0.2 m/s^2), above what running resistance alone gives (< 0.1 m/s^2); 0: no supervision
     min_decel_mps2: float = field(default=0.12, metadata={"ge": 0.0, "le": 5.0})
     min_decel_time_s: float = field(default=3.0, metadata={"gt": 0.0, "le": 60.0})
     decel_filter_s: float = field(default=1.0, metadata={"gt": 0.0, "le": 10.0})

@@ -8,8 +8,10 @@ Two **sensor tiers**, each with its own frozen classical WSP (``baselines.classi
 * ``wheels+accel`` — plus a body accelerometer (``WSPBraking-UICZ1-Accel-v1``).
 
 What an id fixes (``benchmark_env_kwargs``): the vehicle; the sensor errors of the tier
-(``TIER_SENSORS``: wheel-speed resolution 0.05 km/h, noise sigma drawn per stop in 0-0.2 km/h,
-per-axle scale error within +-0.5 %; the accelerometer's bias within +-0.3 m/s^2, noise sigma
+(``TIER_SENSORS``: wheel-speed resolution 0.02 km/h, noise sigma drawn per stop in 0-0.05 km/h
+— period measurement of a ~100-tooth phonic wheel over the 20 ms cycle; its derivative, the
+wheel deceleration a WSP reads, then carries up to ~1 m/s^2 of noise —, per-axle scale error
+within +-0.5 %; the accelerometer's bias within +-0.3 m/s^2, noise sigma
 0.05 m/s^2 per reading, 0.1 s lag); the shared estimator and the safety watchdog at their
 defaults; the scenario distribution of the real world's range (``BENCHMARK_SCENARIO``: every rail
 of ``configs/rails.yaml`` including ``soap_etr1000``, their patterns and levels, speeds from
@@ -32,8 +34,8 @@ TIERS = ("wheels", "wheels+accel")
 VERSION = "v1"
 
 _WHEELS = SensorConfig(
-    wheel_speed_noise_kmh=(0.0, 0.2),
-    wheel_speed_quantum_kmh=0.05,
+    wheel_speed_noise_kmh=(0.0, 0.05),
+    wheel_speed_quantum_kmh=0.02,
     wheel_speed_scale_error=0.005,
     accelerometer_bias_mps2=0.0,
 )
@@ -99,16 +101,34 @@ def env_id(vehicle: str, tier: str) -> str:
     return f"WSPBraking-{BENCHMARK_VEHICLES[vehicle]}{accel}-{VERSION}"
 
 
-def make_benchmark_env(vehicle: str, tier: str, render_mode: str | None = None) -> WSPBrakingEnv:
+# what gymnasium itself may pass to an entry point (the spec's own settings, ignored: the id's
+# settings hold)
+_GYM_KEYS = ("max_episode_steps", "autoreset", "disable_env_checker", "apply_api_compatibility")
+
+
+def _no_overrides(vehicle: str, tier: str, kwargs: dict[str, Any]) -> None:
+    extra = sorted(k for k in kwargs if k not in _GYM_KEYS)
+    if extra:
+        raise ValueError(
+            f"{env_id(vehicle, tier)}: fixes every setting, so {', '.join(extra)} cannot be "
+            "given (use WSPBraking-v0 to choose them)"
+        )
+
+
+def make_benchmark_env(
+    vehicle: str, tier: str, render_mode: str | None = None, **kwargs: Any
+) -> WSPBrakingEnv:
     """The registered single environment of ``vehicle`` and ``tier``."""
+    _no_overrides(vehicle, tier, kwargs)
     return WSPBrakingEnv(render_mode=render_mode, **benchmark_env_kwargs(vehicle, tier))
 
 
 def make_benchmark_vector_env(
-    num_envs: int, vehicle: str, tier: str, render_mode: str | None = None, **_: Any
+    num_envs: int, vehicle: str, tier: str, render_mode: str | None = None, **kwargs: Any
 ) -> WSPBrakingVectorEnv:
     """The registered native vector environment of ``vehicle`` and ``tier`` (gymnasium's
     ``max_episode_steps`` is ignored: the id's time limit holds)."""
+    _no_overrides(vehicle, tier, kwargs)
     return WSPBrakingVectorEnv(
         num_envs=num_envs, render_mode=render_mode, **benchmark_env_kwargs(vehicle, tier)
     )

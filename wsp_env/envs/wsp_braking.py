@@ -62,11 +62,13 @@ So ``obs_dim = 4n + 3 + m (+ 1 + 2n privileged) (+ 1 accelerometer) (+ m residua
 ## Safety watchdog
 
 Between the agent and the valves, as in a real brake control unit and the same for every
-controller (``watchdog``, ``WatchdogConfig``, on by default): an axle whose cylinder stays below
-20 % of the demand for longer than the safety time (10 s) gets the full demand back until
-standstill; when the deceleration the sensors measure stays below 0.12 m/s^2 for 3 s while the
-full demand stands, every release is overridden until standstill. ``info["metrics"]
-["watchdog"]`` counts its interventions. The observation's previous action is the agent's own.
+controller (``watchdog``, ``WatchdogConfig``, on by default): an axle released — its valve
+venting (asking for under 5 % of the demand) or its cylinder under 5 % of the full pressure —
+for longer than the safety time (10 s) gets the full demand back until standstill; when the
+deceleration the sensors measure, less the gradient's part, stays below 0.12 m/s^2 for 3 s while
+the full demand stands and every wheel grips, every release is overridden until standstill.
+``info["metrics"]["watchdog"]`` counts its interventions. The observation's previous action is
+the agent's own.
 
 ## Rewards
 
@@ -179,12 +181,14 @@ from wsp_env.envs.rendering import render_core
 
 def make_core(n_envs: int, **kwargs: Any) -> BrakingCore:
     """A :class:`BrakingCore` of ``n_envs`` environments with ``WSPBrakingEnv``'s arguments; with
-    ``action_mode="residual"`` the frozen classical WSP (``configs/wsp/classical.yaml``) is the
+    ``action_mode="residual"`` the frozen classical WSP of the sensor tier
+    (``configs/wsp/classical.yaml``, with ``accelerometer`` ``classical_accel.yaml``) is the
     controller the residual acts on."""
     if kwargs.get("action_mode") == "residual":
         from wsp_env.baselines.classical import ClassicalWSP, load_wsp_config
 
-        kwargs.setdefault("residual_base", ClassicalWSP(load_wsp_config()))
+        tier = "wheels+accel" if kwargs.get("accelerometer") else "wheels"
+        kwargs.setdefault("residual_base", ClassicalWSP(load_wsp_config(tier=tier)))
     return BrakingCore(n_envs, **kwargs)
 
 

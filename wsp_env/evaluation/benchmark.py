@@ -51,9 +51,9 @@ MIN_GAIN = 0.05  # return units (x 100 m): the classical WSP's least gain for a 
 BOOTSTRAP = 2000
 GRADIENT_LEVEL_PERMILLE = 2.0  # |gradient| below this is "level"
 SPEED_BANDS_KMH = (100.0, 160.0)  # <100, 100-160, >=160
-# the policy's environment settings that the tier decides, whatever the policy brings
-TIER_KEYS = ("accelerometer", "accelerometer_bias_mps2", "sensors", "estimator", "watchdog",
-             "reward", "scenario", "substep_s", "max_time_s")  # fmt: skip
+# the environment settings a policy may choose; the tier fixes every other one
+POLICY_KEYS = ("action_mode", "residual_scale", "residual_deadband", "valve_group")
+RESERVED = ("none", "classical", "oracle")  # the score's ends and the upper reference
 
 
 def sealed_seeds(n: int = SEALED_RUNS) -> list[int]:
@@ -195,20 +195,37 @@ def run_benchmark(
 
     A policy whose sensors are not the tier's (a learned model trained with or without the
     accelerometer) is refused: one line naming it."""
-    from wsp_env.policy import make_policy
+    from wsp_env.baselines.classical import ClassicalWSP
+    from wsp_env.baselines.oracle import Oracle
+    from wsp_env.policy import NoWSP, make_policy
 
     check_tier(tier)
     kwargs = benchmark_env_kwargs(vehicle, tier)
     veh = load_vehicle(kwargs.pop("vehicle"))
     max_time_s = kwargs.pop("max_time_s")
+    builtin = {"none": NoWSP, "classical": ClassicalWSP, "oracle": Oracle}
     for p in policies:
-        needs = getattr(p, "env_kwargs", {}).get("accelerometer")
+        own = getattr(p, "env_kwargs", None) or {}
+        needs = own.get("accelerometer")
         if needs is not None and bool(needs) != kwargs["accelerometer"]:
             have = "with" if needs else "without"
             raise ValueError(
                 f"policy {p.name}: trained {have} an accelerometer, so it belongs to tier "
                 f"{'wheels+accel' if needs else 'wheels'}, not {tier} (--tier)"
             )
+        if own.get("privileged"):
+            raise ValueError(f"policy {p.name}: observes privileged state; the benchmark does not")
+        period = own.get("control_period_s", kwargs["control_period_s"])
+        if period != kwargs["control_period_s"]:
+            raise ValueError(
+                f"policy {p.name}: runs at a {period} s control period; the benchmark's is "
+                f"{kwargs['control_period_s']} s"
+            )
+        other = getattr(p, "vehicle", None)
+        if isinstance(other, str) and other != veh.id:
+            raise ValueError(f"policy {p.name}: trained for vehicle {other!r}, not {veh.id!r}")
+        if p.name in RESERVED and not isinstance(p, builtin[p.name]):
+            raise ValueError(f"policy {p.name}: the name is reserved for the built-in {p.name}")
     names = [p.name for p in policies]
     ends = {"none": make_policy("none"), "classical": make_policy("classical", tier=tier)}
     todo = [ends[n] for n in ("none", "classical") if n not in names] + list(policies)
@@ -219,7 +236,7 @@ def run_benchmark(
             progress(f"{env_id(vehicle, tier)}: {p.name} on {len(stops)} stops")
         res, _ = run_runs(
             veh, stops, p, record="none", max_time_s=max_time_s,
-            env_kwargs=kwargs, tier_keys=TIER_KEYS,
+            env_kwargs=kwargs, policy_keys=POLICY_KEYS,
         )  # fmt: skip
         results[p.name] = res
     none, cls = results["none"], results["classical"]

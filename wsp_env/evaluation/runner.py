@@ -104,7 +104,7 @@ def run_runs(
     max_time_s: float = 600.0,
     env_kwargs: dict[str, Any] | None = None,
     bar: Any = None,
-    tier_keys: tuple[str, ...] = (),
+    policy_keys: tuple[str, ...] | None = None,
 ) -> tuple[list[dict[str, Any]], dict[tuple[str, int], RunRecord]]:
     """The runs of one vehicle, all environments of one batched core, stepped together (a
     suite's runs, ``run_suite``; the benchmark's sealed set). Each result carries the run's
@@ -112,12 +112,12 @@ def run_runs(
     error against the train speed and the watchdog's interventions.
 
     A policy with ``variants`` (the oracle) is a sweep: every variant runs, and per run the one
-    ``policy.choose`` picks is kept. ``tier_keys``: settings of ``env_kwargs`` that a policy's own
-    ``env_kwargs`` may not change (the benchmark's sensors, scenario, reward, watchdog)."""
+    ``policy.choose`` picks is kept. ``policy_keys``: the only settings a policy's own
+    ``env_kwargs`` may set (the benchmark: action mode, residual, valve grouping; None: any)."""
     variants = getattr(policy, "variants", None)
     if variants is not None:  # a sweep (the oracle): every variant, the best per run
         swept = [
-            run_runs(vehicle, runs, v, record, max_time_s, env_kwargs, None, tier_keys)
+            run_runs(vehicle, runs, v, record, max_time_s, env_kwargs, None, policy_keys)
             for v in variants()
         ]
         results, records = [], {}
@@ -132,7 +132,9 @@ def run_runs(
             bar.update(len(runs))
         return results, records
     # a trained policy brings the settings its spaces need (action mode, valve grouping, ...)
-    own = {k: v for k, v in getattr(policy, "env_kwargs", {}).items() if k not in tier_keys}
+    own = dict(getattr(policy, "env_kwargs", None) or {})
+    if policy_keys is not None:
+        own = {k: v for k, v in own.items() if k in policy_keys}
     kwargs = {**(env_kwargs or {}), **own}
     core = make_core(len(runs), vehicle=vehicle, max_time_s=max_time_s, **kwargs)
     for e, run in enumerate(runs):
