@@ -205,6 +205,26 @@ def cases() -> list[Case]:
     cli(s, "plot onto the trace's metadata", "also another output", "--trace", "x", "--plot",
         "x.meta.json")  # fmt: skip
     cli(s, "unknown option", "--bogus", "--bogus", "1")
+    cli(s, "gradient 200 per mille", "--gradient-permille", "--gradient-permille", "200")
+    cli(s, "gradient NaN", "--gradient-permille", "--gradient-permille", NAN)
+    cli(s, "bias without an accelerometer", "no accelerometer", "--accelerometer-bias-mps2",
+        "0.1")  # fmt: skip
+    cli(s, "bias 5 m/s^2", "--accelerometer-bias-mps2", "--accelerometer",
+        "--accelerometer-bias-mps2", "5")  # fmt: skip
+    cli(s, "negative wheel-speed noise", "--wheel-speed-noise-kmh", "--wheel-speed-noise-kmh",
+        "-1")  # fmt: skip
+    cli(s, "policy module:callable missing", "cannot import", "--policy", "no_such_mod:make")
+
+    b = "benchmark"
+    cli(b, "no policy", "--policy", "--tier", "wheels")
+    cli(b, "unknown tier", "--tier", "--policy", "classical", "--tier", "eyes")
+    cli(b, "vehicle without an id", "--vehicle", "--policy", "classical", "--vehicle",
+        "bad_vehicle.yaml")  # fmt: skip
+    cli(b, "runs 0", "--runs", "--policy", "classical", "--runs", "0")
+    cli(b, "runs 1000", "--runs", "--policy", "classical", "--runs", "1000")
+    cli(b, "callable that is no policy", "without bind", "--policy", "json:JSONDecoder")
+    cli(b, "JSON where no folder can be", "--json", "--policy", "none", "--runs", "1", "--json",
+        "/proc/nope/x.json")  # fmt: skip
 
     e = "evaluate"
     cli(e, "no policy", "--policy", "--suite", "quick")

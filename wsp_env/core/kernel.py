@@ -357,8 +357,8 @@ def watchdog_update(
     of 0.1 m/s^2 is not), less the gradient's part (``EP_GRADE_ACC``: the supervision judges
     what the brakes do, so a steep downhill on leaves does not trip it), below
     ``OP_WD_MIN_DECEL`` for ``OP_WD_MIN_DECEL_S`` while the full demand stands and every wheel
-    grips (none slips beyond the estimator's working band, so the fastest wheel is the train)
-    overrides every release: the brakes are being withheld, not the rail giving out."""
+    grips (all within the estimator's working band of the fastest, so the fastest wheel is the
+    train) overrides every release: the brakes are being withheld, not the rail giving out."""
     if obs_par[OP_WD_ON] <= 0.0:
         return
     n_axles = wheel.shape[0]
@@ -383,11 +383,12 @@ def watchdog_update(
     wsp[e, W_SPEED_F] += (fastest - speed_old) * gain
     measured = (speed_old - wsp[e, W_SPEED_F]) / dt
     wsp[e, W_DECEL] += (measured - wsp[e, W_DECEL]) * gain
-    v_ref = wsp[e, W_VREF]
-    band = max(obs_par[OP_ACTIVE_SLIP], obs_par[OP_ACTIVE_SLIP_REL] * v_ref)
+    # every wheel grips: all within the working band of the fastest (judged on the wheels
+    # alone: a reference drifted above the train would make gripping wheels look slipping)
+    band = max(obs_par[OP_ACTIVE_SLIP], obs_par[OP_ACTIVE_SLIP_REL] * fastest)
     grip = True
     for k in range(n_axles):
-        if v_ref - wheel[k] > band:
+        if fastest - wheel[k] > band:
             grip = False
     braking = wsp[e, W_DECEL] - env_par[e, EP_GRADE_ACC]  # what the brakes (and drag) do
     if full_demand and grip and fastest > 1.5 and braking < floor:

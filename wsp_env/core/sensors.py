@@ -29,8 +29,8 @@ in the compiled step, ``core.kernel``):
   measure (the fastest wheel's, filtered over ``decel_filter_s``), less the gradient's part
   (the supervision judges what the brakes do; the line's gradient is known to it), has stayed
   below ``min_decel_mps2`` for ``min_decel_time_s`` while the full demand stands and every
-  wheel grips (none slips beyond the estimator's working band): the brakes are being withheld,
-  not the rail giving out. Its interventions are counted (``BrakingCore.watchdog_interventions``).
+  wheel grips (all within the estimator's working band of the fastest): the brakes are being
+  withheld, not the rail giving out. Its interventions are counted (``BrakingCore.watchdog_interventions``).
 """
 
 from __future__ import annotations
@@ -108,10 +108,10 @@ class WatchdogConfig:
     # (~0.19 bar) is under the brake's threshold; the frozen classical WSP holds down to ~15 %
     # on leaves, which is braking
     release_fraction: float = field(default=0.05, metadata={"gt": 0.0, "le": 1.0})
-    # the floor, on the brakes' share of the deceleration (gradient removed): below what the
-    # lowest adhesion the scenarios hold (leaves, mu 0.025) gives with gripping wheels (about
-    # 0.2 m/s^2), above what running resistance alone gives (< 0.1 m/s^2); 0: no supervision
-    min_decel_mps2: float = field(default=0.12, metadata={"ge": 0.0, "le": 5.0})
+    # the floor, on the brakes' share of the deceleration (gradient removed): about what the
+    # lowest adhesion the scenarios hold (leaves, mu 0.025) gives with gripping wheels, well
+    # above what running resistance alone gives (< 0.1 m/s^2); 0: no supervision
+    min_decel_mps2: float = field(default=0.2, metadata={"ge": 0.0, "le": 5.0})
     min_decel_time_s: float = field(default=3.0, metadata={"gt": 0.0, "le": 60.0})
     decel_filter_s: float = field(default=1.0, metadata={"gt": 0.0, "le": 10.0})
 

@@ -65,7 +65,7 @@ Between the agent and the valves, as in a real brake control unit and the same f
 controller (``watchdog``, ``WatchdogConfig``, on by default): an axle released — its valve
 venting (asking for under 5 % of the demand) or its cylinder under 5 % of the full pressure —
 for longer than the safety time (10 s) gets the full demand back until standstill; when the
-deceleration the sensors measure, less the gradient's part, stays below 0.12 m/s^2 for 3 s while
+deceleration the sensors measure, less the gradient's part, stays below 0.2 m/s^2 for 3 s while
 the full demand stands and every wheel grips, every release is overridden until standstill.
 ``info["metrics"]["watchdog"]`` counts its interventions. The observation's previous action is
 the agent's own.
