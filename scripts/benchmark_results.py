@@ -76,14 +76,15 @@ def score_table(payload: dict[str, Any]) -> str:
     lines = [
         f"**{payload['benchmark']}** ({payload['runs']} stops of the sealed set):",
         "",
-        "| policy | score (IQM) | 95 % interval | stop / classical: mean | worst | pass rate "
-        "| watchdog interventions (stops) | reference error RMS [km/h] |",
-        "|---|---|---|---|---|---|---|---|",
+        "| policy | score (IQM) | 95 % interval | mean normalised score | stop / classical: mean "
+        "| worst | pass rate | watchdog interventions (stops) | reference error RMS [km/h] |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for name, p in payload["policies"].items():
         ci = "{:.3f}-{:.3f}".format(*p["score_ci95"])
         lines.append(
-            f"| {name} | {p['score']:.3f} | {ci} | {p['stop_ratio_mean']:.3f} | "
+            f"| {name} | {p['score']:.3f} | {ci} | {p['score_mean']:.2f} | "
+            f"{p['stop_ratio_mean']:.3f} | "
             f"{p['stop_ratio_worst']:.2f} | {100 * p['pass_rate']:.0f} % | "
             f"{p['watchdog_interventions']} ({p['watchdog_runs']}) | "
             f"{p['reference_error_rms_kmh_mean']:.2f} |"
