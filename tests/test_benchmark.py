@@ -96,6 +96,9 @@ def test_registered_ids_fix_vehicle_tier_and_distribution():
     assert env_id("regiolis", "wheels+accel") == "WSPBraking-Regiolis-Accel-v1"
     obs, _ = venv.reset(seed=0)
     assert obs.shape[0] == 3
+    for bad in ({"vehicle": "etr1000"}, {"max_time_s": 5.0}, {"tier": "wheels"}):
+        with pytest.raises(ValueError, match="fixes every setting"):
+            gym.make("WSPBraking-UICZ1-v1", **bad)
 
 
 class _Half:

@@ -28,5 +28,5 @@ for _vehicle, _name in BENCHMARK_VEHICLES.items():
                 id=_id,
                 entry_point="wsp_env.envs.tiers:make_benchmark_env",
                 vector_entry_point="wsp_env.envs.tiers:make_benchmark_vector_env",
-                kwargs={"vehicle": _vehicle, "tier": _tier},
+                kwargs={"benchmark_id": _id},
             )

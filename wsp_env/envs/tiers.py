@@ -106,29 +106,40 @@ def env_id(vehicle: str, tier: str) -> str:
 _GYM_KEYS = ("max_episode_steps", "autoreset", "disable_env_checker", "apply_api_compatibility")
 
 
-def _no_overrides(vehicle: str, tier: str, kwargs: dict[str, Any]) -> None:
+def ids() -> dict[str, tuple[str, str]]:
+    """Every registered benchmark id and its ``(vehicle, tier)``."""
+    return {env_id(v, t): (v, t) for v in BENCHMARK_VEHICLES for t in TIERS}
+
+
+def _resolve(benchmark_id: str, kwargs: dict[str, Any]) -> tuple[str, str]:
+    """The vehicle and tier of a registered id; any setting given besides gymnasium's own is
+    refused in one line (the id fixes them all)."""
+    table = ids()
+    if benchmark_id not in table:
+        raise ValueError(f"benchmark_id: {benchmark_id!r} is not registered")
     extra = sorted(k for k in kwargs if k not in _GYM_KEYS)
     if extra:
         raise ValueError(
-            f"{env_id(vehicle, tier)}: fixes every setting, so {', '.join(extra)} cannot be "
-            "given (use WSPBraking-v0 to choose them)"
+            f"{benchmark_id}: fixes every setting, so {', '.join(extra)} cannot be given (use "
+            "WSPBraking-v0 to choose them)"
         )
+    return table[benchmark_id]
 
 
 def make_benchmark_env(
-    vehicle: str, tier: str, render_mode: str | None = None, **kwargs: Any
+    benchmark_id: str, render_mode: str | None = None, **kwargs: Any
 ) -> WSPBrakingEnv:
-    """The registered single environment of ``vehicle`` and ``tier``."""
-    _no_overrides(vehicle, tier, kwargs)
+    """The registered single environment ``benchmark_id`` (``WSPBraking-UICZ1-v1``, ...)."""
+    vehicle, tier = _resolve(benchmark_id, kwargs)
     return WSPBrakingEnv(render_mode=render_mode, **benchmark_env_kwargs(vehicle, tier))
 
 
 def make_benchmark_vector_env(
-    num_envs: int, vehicle: str, tier: str, render_mode: str | None = None, **kwargs: Any
+    num_envs: int, benchmark_id: str, render_mode: str | None = None, **kwargs: Any
 ) -> WSPBrakingVectorEnv:
-    """The registered native vector environment of ``vehicle`` and ``tier`` (gymnasium's
+    """The registered native vector environment ``benchmark_id`` (gymnasium's
     ``max_episode_steps`` is ignored: the id's time limit holds)."""
-    _no_overrides(vehicle, tier, kwargs)
+    vehicle, tier = _resolve(benchmark_id, kwargs)
     return WSPBrakingVectorEnv(
         num_envs=num_envs, render_mode=render_mode, **benchmark_env_kwargs(vehicle, tier)
     )
