@@ -208,3 +208,20 @@ def test_simulate_fixes_gradient_accelerometer_bias_and_noise(tmp_path):
     assert d["tier"] == "wheels" and d["policy"] == "none" and d["gradient_permille"] == 0.0
     assert d["sensors"] == {"wheel_speed_noise_kmh": 0.0, "wheel_speed_scale": [1.0] * 4,
                             "accelerometer_bias_mps2": None}  # fmt: skip
+
+
+def test_evaluate_runs_a_suite_with_a_tiers_sensors(tmp_path, capsys):
+    """``evaluate --tier wheels+accel``: the tier's accelerometer and sensor errors, its classical
+    WSP; a wheels-only tier refuses the accelerometer-trained shipped policy in one line."""
+    out = tmp_path / "e.json"
+    argv = ["evaluate", "--policy", "classical", "--suite", "quick", "--tier", "wheels+accel",
+            "--no-progress", "--json", str(out)]  # fmt: skip
+    assert main(argv) == 0
+    runs = json.loads(out.read_text())["runs"]
+    biases = [r["conditions"]["sensors"]["accelerometer_bias_mps2"] for r in runs]
+    assert all(b is not None and abs(b) <= 0.3 for b in biases) and len(set(biases)) > 1
+    noise = [r["conditions"]["sensors"]["wheel_speed_noise_kmh"] for r in runs]
+    assert max(noise) > 0.0 and max(noise) <= 0.05 + 1e-12
+    rc = main(["evaluate", "--policy", "ppo_bc_uic_z1", "--suite", "quick", "--tier", "wheels"])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and "belongs to tier wheels+accel" in err and "\n" not in err

@@ -321,6 +321,12 @@ def _add_evaluate(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--suite", default="quick", help="quick | en15595 | heldout | PATH.yaml")
     p.add_argument("--vehicle", default="uic_z1", help="vehicle id or YAML path (uic_z1)")
     p.add_argument("--wsp-config", default=None, help="thresholds of the classical WSP (YAML)")
+    p.add_argument(
+        "--tier", choices=("wheels", "wheels+accel"), default=None,
+        help="run with a sensor tier's sensors (its benchmark id's errors; wheels+accel: an "
+        "accelerometer), --policy classical being that tier's classical WSP (default: ideal "
+        "wheel-speed sensors, the wheels classical WSP, a learned policy's own sensors)",
+    )  # fmt: skip
     p.add_argument("--json", dest="json_path", default=None, help="write the result here")
     p.add_argument("--report", default=None, help="write report.md and plots into this folder")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -332,13 +338,33 @@ def cmd_evaluate(args: argparse.Namespace) -> dict[str, Any]:
 
     suite = load_suite(args.suite)
     expand(suite, load_vehicle(args.vehicle))  # fail early: the vehicle, the suite's speeds
-    policies = _policies(args.policy, args.wsp_config)
+    policies = _policies(args.policy, args.wsp_config, args.tier or "wheels")
+    env_kwargs, policy_keys = None, None
+    if args.tier is not None:
+        import dataclasses
+
+        from wsp_env.envs.tiers import TIER_SENSORS
+
+        accel = args.tier == "wheels+accel"
+        for pol in policies:
+            own = (getattr(pol, "env_kwargs", None) or {}).get("accelerometer")
+            if own is not None and bool(own) != accel:
+                raise UserError(
+                    f"--tier: policy {pol.name} was trained {'with' if own else 'without'} an "
+                    f"accelerometer, so it belongs to tier {'wheels+accel' if own else 'wheels'}"
+                )
+        env_kwargs = {"accelerometer": accel,
+                      "sensors": dataclasses.asdict(TIER_SENSORS[args.tier])}  # fmt: skip
+        # the tier decides the sensors; a learned policy keeps its spaces' own settings
+        policy_keys = ("action_mode", "residual_scale", "residual_deadband", "valve_group",
+                       "privileged", "control_period_s")  # fmt: skip
     report_tmp = _reserve(args, "report", "--report", "dir")
     results, records = [], {}
     for pol in policies:
         res, rec = run_suite(
             args.vehicle, suite, pol, record="first_seed" if args.report else "none",
-            progress=not args.no_progress and sys.stderr.isatty(),
+            progress=not args.no_progress and sys.stderr.isatty(), env_kwargs=env_kwargs,
+            policy_keys=policy_keys,
         )  # fmt: skip
         results.extend(res)
         records[pol.name] = rec
@@ -346,6 +372,7 @@ def cmd_evaluate(args: argparse.Namespace) -> dict[str, Any]:
     payload = {
         "suite": suite.name,
         "vehicle": args.vehicle,
+        "tier": args.tier,
         "policies": [p.name for p in policies],
         "runs": results,
         "summary": summary,
