@@ -5,13 +5,21 @@ would otherwise fall back to ``DummyVecEnv`` and step environments one by one in
 adapter keeps the batched path: one compiled call per step for all environments. The vector env
 autoresets in the same step, which is exactly SB3's convention: the returned observation already
 belongs to the new episode and the last one goes to ``infos[i]["terminal_observation"]``.
+
+At an episode's end ``infos[i]["episode"]`` carries ``{"r", "l", "t"}`` as ``VecMonitor`` writes
+it (the undiscounted return of the environment's own reward, before any ``VecNormalize``; the
+length in steps; seconds since the adapter was made), so SB3 logs episode statistics without a
+``VecMonitor``. ``seed()`` and ``set_options()`` (SB3's ``VecEnv`` API: one seed for all, or
+per-environment options) take effect at the next ``reset()``.
 """
 
 from __future__ import annotations
 
+import time
 from typing import Any
 
 import numpy as np
+from gymnasium.utils import seeding
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv
 
 from wsp_env.envs import WSPBrakingVectorEnv
@@ -26,16 +34,27 @@ class SB3VecEnv(VecEnv):
             self.venv.num_envs, self.venv.single_observation_space, self.venv.single_action_space
         )
         self._actions: np.ndarray | None = None
-        self._seed: int | None = None
+        self._lengths = np.zeros(self.num_envs, dtype=np.int64)
+        self._t0 = time.perf_counter()
 
     def reset(self) -> np.ndarray:
-        obs, _ = self.venv.reset(seed=self._seed)
-        self._seed = None
+        """Start every environment anew, with the seeds of ``seed()`` and the options of
+        ``set_options()`` if given (then forgotten, as SB3's own ``VecEnv`` does)."""
+        seeds = list(self._seeds)
+        options = [dict(o) if o else None for o in self._options]
+        if all(o == options[0] for o in options):
+            any_seed = any(x is not None for x in seeds)
+            obs, _ = self.venv.reset(seed=seeds if any_seed else None, options=options[0])
+        else:  # per-environment options: each env seeded and reset with its own
+            core = self.venv.core
+            for i, (seed, opts) in enumerate(zip(seeds, options, strict=True)):
+                core.rngs[i] = seeding.np_random(seed)[0]
+                core.reset_env(i, opts)
+            obs = core.obs.copy()
+        self._reset_seeds()
+        self._reset_options()
+        self._lengths[:] = 0
         return obs
-
-    def seed(self, seed: int | None = None) -> list[int | None]:  # type: ignore[override]
-        self._seed = seed
-        return [None if seed is None else seed + i for i in range(self.num_envs)]
 
     def step_async(self, actions: np.ndarray) -> None:
         self._actions = actions
@@ -44,14 +63,23 @@ class SB3VecEnv(VecEnv):
         assert self._actions is not None, "step_async first"
         obs, rewards, terminated, truncated, info = self.venv.step(self._actions)
         dones = terminated | truncated
+        self._lengths += 1
         infos: list[dict[str, Any]] = [{} for _ in range(self.num_envs)]
         if dones.any():
+            elapsed = round(time.perf_counter() - self._t0, 6)
             for i in np.flatnonzero(dones):
+                final = info["final_info"][i]
                 infos[i] = {
                     "terminal_observation": info["final_obs"][i],
                     "TimeLimit.truncated": bool(truncated[i] and not terminated[i]),
-                    **info["final_info"][i],
+                    **final,
+                    "episode": {
+                        "r": float(final["metrics"]["episode_return"]),
+                        "l": int(self._lengths[i]),
+                        "t": elapsed,
+                    },
                 }
+                self._lengths[i] = 0
         return obs, rewards.astype(np.float32), dones, infos
 
     def close(self) -> None:

@@ -279,3 +279,43 @@ def test_accelerometer_reads_specific_force_with_a_bias_drawn_per_episode():
             assert drawn == scen_acc
     assert np.all(np.abs(biases[0]) <= 0.05) and np.unique(biases[0]).size == 8
     assert np.all(biases[1] == 0.0)
+
+
+def test_sb3_adapter_reports_episodes_and_takes_seeds_and_options():
+    """``infos[i]["episode"]`` as VecMonitor writes it (return = the summed rewards, length =
+    the steps); ``seed()`` and ``set_options()`` reach the next reset, per environment too."""
+    from wsp_env.agents.sb3_vec import SB3VecEnv
+
+    venv = SB3VecEnv(num_envs=2)
+    venv.seed(7)
+    venv.set_options({"rail": "dry", "speed_kmh": 30.0, "pattern": "uniform"})
+    venv.reset()
+    core = venv.venv.core
+    assert list(core.sim.speed_mps * 3.6) == pytest.approx([30.0, 30.0])
+    total, steps, done = np.zeros(2), np.zeros(2, dtype=int), np.zeros(2, dtype=bool)
+    episodes = [None, None]
+    while not done.all():
+        venv.step_async(np.ones((2, 4), dtype=np.float32))
+        _, rewards, dones, infos = venv.step_wait()
+        for i in range(2):
+            if not done[i]:
+                total[i] += rewards[i]
+                steps[i] += 1
+                if dones[i]:
+                    episodes[i] = infos[i]["episode"]
+                    done[i] = True
+    for i in range(2):
+        assert episodes[i]["l"] == steps[i]
+        assert episodes[i]["r"] == pytest.approx(total[i], rel=1e-5)
+    venv.set_options([{"rail": "dry", "speed_kmh": 30.0}, {"rail": "soap", "speed_kmh": 50.0}])
+    venv.seed(3)
+    venv.reset()
+    assert [d["rail"] for d in (core.describe(0), core.describe(1))] == ["dry", "soap"]
+    assert list(core.sim.speed_mps * 3.6) == pytest.approx([30.0, 50.0])
+    first = core.describe(1)["mu_contaminated"]
+    venv.set_options([{"rail": "dry", "speed_kmh": 30.0}, {"rail": "soap", "speed_kmh": 50.0}])
+    venv.seed(3)
+    venv.reset()
+    assert core.describe(1)["mu_contaminated"] == first  # same seed, same draw
+    venv.reset()  # seeds and options are used once
+    assert core.describe(0)["speed_kmh"] != 30.0 or core.describe(1)["speed_kmh"] != 50.0
