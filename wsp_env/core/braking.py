@@ -531,20 +531,19 @@ class BrakingCore:
         give the observed decelerations."""
         sim = self.sim
         self.axle_wsp[e, :, K.AW_WHEEL] = wheel_speed_mps
+        state = sim.axle_state.copy()  # the rig's pressures, the virtual vehicle's untouched
+        state[e, :, L.AS_P] = pressure_bar
+        external = self.state._replace(axle_state=state)
         if decel_mps2 is not None:
             if self.accelerometer:
                 self.wsp[e, K.W_ACC] = (
                     decel_mps2 - sim.env_par[e, L.EP_GRADE_ACC] + self.sensor_par[e, K.SP_ACC_BIAS]
                 )
             K.estimate_external(
-                e, float(sim.env_state[e, L.ES_T]), pressure_bar, self.params, self.state,
-                sim.control_period_s, self.mode,
+                e, float(sim.env_state[e, L.ES_T]), self.params, external, sim.control_period_s,
+                self.mode,
             )  # fmt: skip
-        state = sim.axle_state.copy()
-        state[e, :, L.AS_P] = pressure_bar
-        K.write_observation(
-            e, self.params, self.state._replace(axle_state=state), sim.control_period_s
-        )
+        K.write_observation(e, self.params, external, sim.control_period_s)
         self.prev_wheel[e] = wheel_speed_mps
         if self.base is not None:
             self._base_stale = True

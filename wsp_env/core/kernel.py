@@ -137,12 +137,11 @@ W_ANCHOR_V = 3  # m/s, reference at the last anchor (NaN: none yet)
 W_ANCHOR_T = 4  # s, time of the last anchor
 W_AGE = 5  # s since the last anchor, counted once the WSP has acted since it
 W_WORKED = 6  # 1.0: the WSP has acted since the last anchor
-W_ACTIVE = 7  # 1.0: some valve was out of apply in the last period
-W_DECEL = 8  # m/s^2, the measured deceleration the watchdog supervises (filtered)
-W_LOW_FOR = 9  # s the measured deceleration has stayed below the floor
-W_OVERRIDE = 10  # 1.0 once the minimum-deceleration supervision has overridden the releases
-W_SPEED_F = 11  # m/s, the fastest wheel's speed, filtered (the supervision's input)
-N_W = 12
+W_DECEL = 7  # m/s^2, the measured deceleration the watchdog supervises (filtered)
+W_LOW_FOR = 8  # s the measured deceleration has stayed below the floor
+W_OVERRIDE = 9  # 1.0 once the minimum-deceleration supervision has overridden the releases
+W_SPEED_F = 10  # m/s, the fastest wheel's speed, filtered (the supervision's input)
+N_W = 11
 
 # per-axle sensor, estimator and watchdog state (``axle_wsp``)
 AW_WHEEL = 0  # m/s, the measured wheel speed
@@ -151,9 +150,8 @@ AW_RELEASED_FOR = 2  # s the cylinder has been below OP_FREE_ROLL_BAR
 AW_WD_RELEASED_FOR = 3  # s the axle has been released (watchdog)
 AW_WD_RESTORED = 4  # 1.0 once the watchdog has given the axle its demand back
 AW_VENT_FOR = 5  # s the axle's valve has vented without a break
-AW_SPARE = 6  # unused
-AW_VENT_MIN = 7  # m/s, the lowest reading since this vent began
-N_AW = 8
+AW_VENT_MIN = 6  # m/s, the lowest reading since this vent began
+N_AW = 7
 
 OBS_CLIP = 5.0
 MODE_CONTINUOUS = 0
@@ -244,11 +242,13 @@ def measure_acceleration(e, train_decel, env_par, sensor_par, wsp, rng, ctrl_dt)
 
 @njit(**INLINE_FLAGS)
 def update_reference(
-    e, t, wheel, decel, pressure, free_bar, vented, demand, active, wsp, axle_wsp, obs_par, dt
+    e, t, demand, active, cmd, axle_par, axle_state, prev_wheel, wsp, axle_wsp, obs_par, dt
 ):
     """The WSP's reference speed after one period — one estimator for every controller.
 
-    ``wheel``: measured wheel speeds (m/s), ``decel``: their decelerations over the period,
+    The measured wheel speeds are ``AW_WHEEL`` (``prev_wheel``: at the period's start, for
+    their decelerations), the cylinder pressures ``axle_state[..., AS_P]``, ``cmd`` the
+    period's valve commands;
     ``pressure``: cylinder pressures (bar), ``free_bar``: per axle, the pressure below which its
     brake is off (``OP_FREE_ROLL_BAR``, or the brake's threshold where higher), ``vented``: the
     axle's valve vented in the period,
@@ -263,10 +263,10 @@ def update_reference(
     ``OP_FREE_ROLL_S`` and which no longer spins up rolls with the train, and the reference is
     set to it, up or down (the periodic release is how a WSP makes one). A wheel slowing faster
     than ``OP_REF_DECEL_LIMIT`` (faster than any train) is not free."""
-    n_axles = wheel.shape[0]
+    n_axles = axle_wsp.shape[1]
     fastest = 0.0
     for k in range(n_axles):
-        fastest = max(fastest, wheel[k])
+        fastest = max(fastest, axle_wsp[e, k, AW_WHEEL])
     v_ref = wsp[e, W_VREF]
     if obs_par[OP_ACCELEROMETER] > 0.0:
         fall = min(max(wsp[e, W_ACC], 0.0), 2.0 * obs_par[OP_REF_DECEL_LIMIT])
@@ -275,37 +275,38 @@ def update_reference(
     else:
         fall = obs_par[OP_REF_DECEL_LIMIT]
     v_ref = max(fastest, v_ref - fall * dt)
-    wsp[e, W_ACTIVE] = 1.0 if active else 0.0
     # anchors: a wheel rolling freely with the train
     anchor = -1.0
     v_ref_old = wsp[e, W_VREF]
     band = max(obs_par[OP_ACTIVE_SLIP], obs_par[OP_ACTIVE_SLIP_REL] * v_ref_old)
     for k in range(n_axles):
-        if pressure[k] < free_bar[k]:
+        wheel = axle_wsp[e, k, AW_WHEEL]
+        decel = (prev_wheel[e, k] - wheel) / dt
+        # the brake is off below its threshold (or 0.1 bar); a vent targets a pressure there
+        # (a hold, CMD_HOLD < 0, is none)
+        free_bar = max(obs_par[OP_FREE_ROLL_BAR], axle_par[e, k, AP_P_THRESH])
+        vented = cmd[e, k] >= 0.0 and demand > free_bar and cmd[e, k] * demand < free_bar
+        if axle_state[e, k, AS_P] < free_bar:
             axle_wsp[e, k, AW_RELEASED_FOR] += dt
         else:
             axle_wsp[e, k, AW_RELEASED_FOR] = 0.0
-        if vented[k]:
+        if vented:
             if axle_wsp[e, k, AW_VENT_FOR] == 0.0:  # a vent begins
-                axle_wsp[e, k, AW_VENT_MIN] = wheel[k]
+                axle_wsp[e, k, AW_VENT_MIN] = wheel
             axle_wsp[e, k, AW_VENT_FOR] += dt
-            axle_wsp[e, k, AW_VENT_MIN] = min(axle_wsp[e, k, AW_VENT_MIN], wheel[k])
+            axle_wsp[e, k, AW_VENT_MIN] = min(axle_wsp[e, k, AW_VENT_MIN], wheel)
         else:
             axle_wsp[e, k, AW_VENT_FOR] = 0.0
         # spun up: risen by more than the working band above its lowest reading of the vent
         # (lasting evidence: a wheel-speed sensor's noise is far below the band)
-        spun_up = wheel[k] - axle_wsp[e, k, AW_VENT_MIN] > band
+        spun_up = wheel - axle_wsp[e, k, AW_VENT_MIN] > band
         off = axle_wsp[e, k, AW_RELEASED_FOR] >= obs_par[OP_FREE_ROLL_S] - 1e-9 or (
             axle_wsp[e, k, AW_VENT_FOR] >= obs_par[OP_FREE_ROLL_S] - 1e-9 and spun_up
         )
         # no longer spinning up, nor slowing faster than any train decelerates
-        free = (
-            off
-            and -decel[k] < obs_par[OP_FREE_ROLL_ACCEL]
-            and decel[k] < obs_par[OP_REF_DECEL_LIMIT]
-        )
+        free = off and -decel < obs_par[OP_FREE_ROLL_ACCEL] and decel < obs_par[OP_REF_DECEL_LIMIT]
         if free:
-            anchor = max(anchor, wheel[k])
+            anchor = max(anchor, wheel)
     if anchor >= 0.0 and active and demand > 0.0:
         span = t - wsp[e, W_ANCHOR_T]
         if not math.isnan(wsp[e, W_ANCHOR_V]) and span > 1.0:
@@ -342,9 +343,7 @@ def watchdog_commands(e, cmd, wsp, axle_wsp, obs_par):
 
 
 @njit(**INLINE_FLAGS)
-def watchdog_update(
-    e, cmd, wheel, pressure, demand, full_demand, env_par, wsp, axle_wsp, obs_par, dt
-):
+def watchdog_update(e, cmd, axle_state, demand, full_demand, env_par, wsp, axle_wsp, obs_par, dt):
     """Advance the watchdog's timers after a period (EN 15595's WSP watchdog and a
     minimum-deceleration supervision, outside the controller).
 
@@ -361,11 +360,11 @@ def watchdog_update(
     train) overrides every release: the brakes are being withheld, not the rail giving out."""
     if obs_par[OP_WD_ON] <= 0.0:
         return
-    n_axles = wheel.shape[0]
+    n_axles = axle_wsp.shape[1]
+    low = obs_par[OP_WD_RELEASE_FRACTION]
     for k in range(n_axles):
-        low = obs_par[OP_WD_RELEASE_FRACTION]
         vent = 0.0 <= cmd[e, k] < low
-        off = pressure[k] < low * env_par[e, EP_P_MAX]
+        off = axle_state[e, k, AS_P] < low * env_par[e, EP_P_MAX]
         if demand > 0.0 and (vent or off):
             axle_wsp[e, k, AW_WD_RELEASED_FOR] += dt
         else:
@@ -377,7 +376,7 @@ def watchdog_update(
         return
     fastest = 0.0
     for k in range(n_axles):
-        fastest = max(fastest, wheel[k])
+        fastest = max(fastest, axle_wsp[e, k, AW_WHEEL])
     gain = min(1.0, dt / obs_par[OP_WD_DECEL_TAU])
     speed_old = wsp[e, W_SPEED_F]
     wsp[e, W_SPEED_F] += (fastest - speed_old) * gain
@@ -388,7 +387,7 @@ def watchdog_update(
     band = max(obs_par[OP_ACTIVE_SLIP], obs_par[OP_ACTIVE_SLIP_REL] * fastest)
     grip = True
     for k in range(n_axles):
-        if fastest - wheel[k] > band:
+        if fastest - axle_wsp[e, k, AW_WHEEL] > band:
             grip = False
     braking = wsp[e, W_DECEL] - env_par[e, EP_GRADE_ACC]  # what the brakes (and drag) do
     if full_demand and grip and fastest > 1.5 and braking < floor:
@@ -495,7 +494,6 @@ def reset_obs(
     wsp[e, W_ANCHOR_T] = 0.0
     wsp[e, W_AGE] = 0.0
     wsp[e, W_WORKED] = 0.0
-    wsp[e, W_ACTIVE] = 0.0
     wsp[e, W_DECEL] = 0.0
     wsp[e, W_LOW_FOR] = 0.0
     wsp[e, W_OVERRIDE] = 0.0
@@ -512,10 +510,10 @@ def reset_obs(
 def estimate_and_supervise(
     e,
     t,
-    pressure,
     cmd,
     env_par,
     axle_par,
+    axle_state,
     wsp,
     axle_wsp,
     prev_wheel,
@@ -525,22 +523,10 @@ def estimate_and_supervise(
     mode,
 ):
     """After a period, from the sensors' readings (``AW_WHEEL``, ``W_ACC``) and the cylinder
-    pressures (bar): the reference speed and the watchdog's timers. One implementation for the
-    kernel and for a vehicle outside it (the rig, ``BrakingCore.observe_external``); ``cmd``:
-    the valve commands of the period (the watchdog's safety time counts vents)."""
-    n_axles = pressure.shape[0]
-    wheel = np.empty(n_axles)
-    decel = np.empty(n_axles)
-    vented = np.empty(n_axles, dtype=np.bool_)
-    demand_now = demand_bar(env_par, e, t)
-    free_bar = np.empty(n_axles)
-    for k in range(n_axles):
-        wheel[k] = axle_wsp[e, k, AW_WHEEL]
-        decel[k] = (prev_wheel[e, k] - wheel[k]) / ctrl_dt
-        # a vent: a target below the free-rolling pressure (a hold, CMD_HOLD < 0, is none)
-        free_bar[k] = max(obs_par[OP_FREE_ROLL_BAR], axle_par[e, k, AP_P_THRESH])
-        target = cmd[e, k] * demand_now
-        vented[k] = cmd[e, k] >= 0.0 and demand_now > free_bar[k] and target < free_bar[k]
+    pressures (``axle_state[..., AS_P]``): the reference speed and the watchdog's timers. One
+    implementation for the kernel and for a vehicle outside it (the rig,
+    ``BrakingCore.observe_external``); ``cmd``: the valve commands of the period. Nothing is
+    allocated: it runs per env and period in the hot path."""
     # the WSP works: a valve was out of apply in the period, or a wheel slipped at its start
     active = False
     for j in range(prev_action.shape[1]):
@@ -548,16 +534,16 @@ def estimate_and_supervise(
             active = True
     v_ref_old = wsp[e, W_VREF]
     slip_min = max(obs_par[OP_ACTIVE_SLIP], obs_par[OP_ACTIVE_SLIP_REL] * v_ref_old)
-    for k in range(n_axles):
+    for k in range(axle_wsp.shape[1]):
         if v_ref_old - prev_wheel[e, k] > slip_min:
             active = True
     demand = demand_bar(env_par, e, t)
     update_reference(
-        e, t, wheel, decel, pressure, free_bar, vented, demand, active, wsp, axle_wsp, obs_par,
+        e, t, demand, active, cmd, axle_par, axle_state, prev_wheel, wsp, axle_wsp, obs_par,
         ctrl_dt,
     )  # fmt: skip
     full = t >= env_par[e, EP_DEMAND_DELAY] + env_par[e, EP_DEMAND_RISE]
-    watchdog_update(e, cmd, wheel, pressure, demand, full, env_par, wsp, axle_wsp, obs_par, ctrl_dt)
+    watchdog_update(e, cmd, axle_state, demand, full, env_par, wsp, axle_wsp, obs_par, ctrl_dt)
 
 
 @njit(**KERNEL_FLAGS)
@@ -581,17 +567,14 @@ def sense_and_estimate(
 ):
     """After a period of physics: the sensors read the simulated vehicle, then
     ``estimate_and_supervise``."""
-    n_axles = axle_par.shape[1]
-    pressure = np.empty(n_axles)
-    for k in range(n_axles):
+    for k in range(axle_par.shape[1]):
         true_wheel = axle_state[e, k, AS_OMEGA] * axle_par[e, k, AP_RADIUS]
         axle_wsp[e, k, AW_WHEEL] = measure_wheel(e, k, true_wheel, sensor_par, axle_wsp, rng)
-        pressure[k] = axle_state[e, k, AS_P]
     if obs_par[OP_ACCELEROMETER] > 0.0:
         measure_acceleration(e, train_decel, env_par, sensor_par, wsp, rng, ctrl_dt)
     estimate_and_supervise(
-        e, t, pressure, cmd, env_par, axle_par, wsp, axle_wsp, prev_wheel, prev_action, obs_par,
-        ctrl_dt, mode,
+        e, t, cmd, env_par, axle_par, axle_state, wsp, axle_wsp, prev_wheel, prev_action,
+        obs_par, ctrl_dt, mode,
     )  # fmt: skip
 
 
@@ -765,18 +748,11 @@ def write_observation(e: int, p: Params, s: State, control_period_s: float) -> N
 
 
 def estimate_external(
-    e: int,
-    t_s: float,
-    pressure_bar: np.ndarray,
-    p: Params,
-    s: State,
-    control_period_s: float,
-    mode: int,
+    e: int, t_s: float, p: Params, s: State, control_period_s: float, mode: int
 ) -> None:
     """``estimate_and_supervise`` on the bundles, for readings written from outside the kernel
-    (``AW_WHEEL``: a rig's wheel speeds)."""
+    (``AW_WHEEL`` and ``axle_state``'s pressures: a rig's)."""
     estimate_and_supervise(
-        e, t_s, np.ascontiguousarray(pressure_bar, dtype=np.float64), s.cmd, p.env_par,
-        p.axle_par, s.wsp, s.axle_wsp, s.prev_wheel, s.prev_action, p.obs_par, control_period_s,
-        mode,
+        e, t_s, s.cmd, p.env_par, p.axle_par, s.axle_state, s.wsp, s.axle_wsp, s.prev_wheel,
+        s.prev_action, p.obs_par, control_period_s, mode,
     )  # fmt: skip
