@@ -382,6 +382,24 @@ def shipped_policies() -> list[str]:
     return sorted(p.stem for p in pretrained_dir().glob("*.zip"))
 
 
+def sensor_tier(policy: Any) -> str | None:
+    """The sensor tier a policy was trained in (``wheels`` or ``wheels+accel``, from its
+    ``env_kwargs``), or None where it does not say (the built-in controllers run in any)."""
+    accel = (getattr(policy, "env_kwargs", None) or {}).get("accelerometer")
+    return None if accel is None else ("wheels+accel" if accel else "wheels")
+
+
+def check_sensor_tier(policy: Any, tier: str) -> None:
+    """Refuse, in one line, a policy trained in another sensor tier than ``tier``."""
+    own = sensor_tier(policy)
+    if own is not None and own != tier:
+        have = "with" if own == "wheels+accel" else "without"
+        raise ValueError(
+            f"policy {policy.name}: trained {have} an accelerometer, so it belongs to tier "
+            f"{own}, not {tier}"
+        )
+
+
 POLICY_METHODS = ("bind", "reset", "act")
 
 

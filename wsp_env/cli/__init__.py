@@ -235,10 +235,14 @@ def cmd_simulate(args: argparse.Namespace) -> dict[str, Any]:
     rail = load_rail(args.rail, args.rails_config)  # a bad table or rail fails here, named
     tier = "wheels+accel" if args.accelerometer else "wheels"
     (policy,) = _policies([args.policy], args.wsp_config, tier)
-    own = getattr(policy, "env_kwargs", {}).get("accelerometer")
-    if args.accelerometer and own is False:
-        raise UserError(f"--accelerometer: policy {policy.name} was trained without one")
-    accelerometer = bool(args.accelerometer or own)
+    from wsp_env.policy import check_sensor_tier, sensor_tier
+
+    if args.accelerometer:
+        try:
+            check_sensor_tier(policy, tier)
+        except ValueError as err:
+            raise UserError(f"--accelerometer: {err}") from None
+    accelerometer = args.accelerometer or sensor_tier(policy) == "wheels+accel"
     if args.accelerometer_bias_mps2 is not None and not accelerometer:
         raise UserError(
             "--accelerometer-bias-mps2: there is no accelerometer (add --accelerometer)"
@@ -344,15 +348,14 @@ def cmd_evaluate(args: argparse.Namespace) -> dict[str, Any]:
         import dataclasses
 
         from wsp_env.envs.tiers import TIER_SENSORS
+        from wsp_env.policy import check_sensor_tier
 
         accel = args.tier == "wheels+accel"
         for pol in policies:
-            own = (getattr(pol, "env_kwargs", None) or {}).get("accelerometer")
-            if own is not None and bool(own) != accel:
-                raise UserError(
-                    f"--tier: policy {pol.name} was trained {'with' if own else 'without'} an "
-                    f"accelerometer, so it belongs to tier {'wheels+accel' if own else 'wheels'}"
-                )
+            try:
+                check_sensor_tier(pol, args.tier)
+            except ValueError as err:
+                raise UserError(f"--tier: {err}") from None
         env_kwargs = {"accelerometer": accel,
                       "sensors": dataclasses.asdict(TIER_SENSORS[args.tier])}  # fmt: skip
         # the tier decides the sensors; a learned policy keeps its spaces' own settings

@@ -197,7 +197,7 @@ def run_benchmark(
     accelerometer) is refused: one line naming it."""
     from wsp_env.baselines.classical import ClassicalWSP
     from wsp_env.baselines.oracle import Oracle
-    from wsp_env.policy import NoWSP, make_policy
+    from wsp_env.policy import NoWSP, check_sensor_tier, make_policy
 
     check_tier(tier)
     kwargs = benchmark_env_kwargs(vehicle, tier)
@@ -205,14 +205,8 @@ def run_benchmark(
     max_time_s = kwargs.pop("max_time_s")
     builtin = {"none": NoWSP, "classical": ClassicalWSP, "oracle": Oracle}
     for p in policies:
+        check_sensor_tier(p, tier)
         own = getattr(p, "env_kwargs", None) or {}
-        needs = own.get("accelerometer")
-        if needs is not None and bool(needs) != kwargs["accelerometer"]:
-            have = "with" if needs else "without"
-            raise ValueError(
-                f"policy {p.name}: trained {have} an accelerometer, so it belongs to tier "
-                f"{'wheels+accel' if needs else 'wheels'}, not {tier} (--tier)"
-            )
         if own.get("privileged"):
             raise ValueError(f"policy {p.name}: observes privileged state; the benchmark does not")
         period = own.get("control_period_s", kwargs["control_period_s"])
