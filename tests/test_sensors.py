@@ -167,9 +167,9 @@ def test_the_watchdog_stops_a_policy_that_vents_forever(rail, speed, gradient):
     assert locked["watchdog"]["total"] == 0
 
 
-def test_the_watchdog_leaves_the_classical_wsp_alone_on_the_judging_suites():
-    """The frozen classical WSP never trips it on en15595's soap runs (it is a backstop, not a
-    controller)."""
+def test_the_watchdog_leaves_the_classical_wsp_alone_on_the_quick_suite():
+    """The frozen classical WSP never trips it on the `quick` suite (soap, leaves, oil, a step:
+    it is a backstop, not a controller; on the sealed set it never intervened either)."""
     from wsp_env.evaluation import load_suite, run_suite
     from wsp_env.policy import make_policy
 
