@@ -43,7 +43,8 @@ def train_config(tmp_path, **changes):
         "policy_kwargs": {"net_arch": [16, 16]}, "learning_rate": "lin_3e-4", "n_steps": 32,
         "batch_size": 64, "n_epochs": 2, "gamma": 0.999,
         "env_kwargs": {"vehicle": "uic_z1", "scenario": {"speed_kmh": [30, 40]}},
-        "eval": {"suite": str(suite), "every_timesteps": 256},
+        "eval": {"suite": str(suite), "every_timesteps": 256, "curve_every_timesteps": 256,
+                 "curve_runs": 2},
         "checkpoint_every_timesteps": 256,
     }  # fmt: skip
     cfg.update(changes)
@@ -122,6 +123,25 @@ def test_train_writes_the_contract(ppo_run):
     )  # the schedule as written
 
 
+def test_learning_curve_is_the_same_stops_beside_the_classical_line(ppo_run):
+    """curve.json: the first ``curve_runs`` runs of the validation suite at step 0, every
+    ``curve_every_timesteps`` and at the end, with the classical WSP's constant line and the
+    benchmark's score (1 = the classical WSP); the same rows in the logger's CSV."""
+    _, _, out = ppo_run
+    curve = json.loads((out / "curve.json").read_text())
+    assert [h["timesteps"] for h in curve["history"]] == [0, 256, 512]
+    assert curve["cases"] == ["s_30", "d_30"] and curve["runs"] == [7, 7]
+    assert curve["classical"]["score"] == pytest.approx(1.0)
+    for row in curve["history"]:
+        assert row["passed"] <= 2 and row["mean_stopping_distance_m"] > 0
+        assert row["score"] is None or np.isfinite(row["score"])
+    with (out / "progress.csv").open(newline="") as fh:
+        logged = [r for r in csv.DictReader(fh) if r.get("curve/mean_return")]
+    assert len(logged) >= 1
+    result = json.loads((out / "train.json").read_text())
+    assert result["threads"]["role"] == "train" and result["threads"]["update"]["updates"] >= 1
+
+
 def test_a_trained_model_evaluates_and_simulates(ppo_run, tmp_path):
     _, tmp, out = ppo_run
     suite = str(tmp / "suite.yaml")
@@ -184,7 +204,14 @@ def test_resume_in_chunks_is_bit_for_bit(tmp_path, kind):
         np.testing.assert_array_equal(pickle.load(a).obs_rms.var, pickle.load(b).obs_rms.var)
     # the chunked run's history holds both evaluations, as the one-go run's does
     hist = json.loads((rest / "validation.json").read_text())["history"]
-    assert [h["timesteps"] for h in hist] == [int(half), 2 * int(half)]
+    whole = json.loads((one / "validation.json").read_text())["history"]
+    assert [h["timesteps"] for h in hist] == [h["timesteps"] for h in whole]
+    assert [h["timesteps"] for h in hist][-2:] == [int(half), 2 * int(half)]
+    if kind == "sac":  # the first validation early: a tenth of the budget
+        assert hist[0]["timesteps"] == 40
+    # the fixed-seed learning curve is deterministic: the chunked run's rows are the one-go's
+    curve = json.loads((rest / "curve.json").read_text())
+    assert curve["history"] == json.loads((one / "curve.json").read_text())["history"]
     # both calls' CSV logs in one progress.csv: each timestep once, in order
     with (rest / "progress.csv").open(newline="") as fh:
         steps = [int(float(r["time/total_timesteps"])) for r in csv.DictReader(fh)]

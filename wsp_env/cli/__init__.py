@@ -521,15 +521,48 @@ def _add_bench(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--json", dest="json_path", default=None, help="write the result here")
     p.add_argument("--repeats", type=int, default=5, help="timed runs per figure (5; 1-100)")
     p.add_argument("--quick", action="store_true", help="tiny counts (smoke test)")
+    p.add_argument("--train", action="store_true",
+                   help="training throughput instead: PPO env-steps/s including updates for a "
+                   "training config, beside SB3 PPO on CartPole-v1 with the same settings "
+                   "(docs/training.md, Threads)")  # fmt: skip
+    p.add_argument("--config", default=None,
+                   help="with --train: the training config (a path or built-in name; "
+                   "ppo_uic_z1)")  # fmt: skip
+    p.add_argument(
+        "--rollouts",
+        type=int,
+        default=4,
+        help="with --train: rollouts (and updates) per timed run (4; 1-100)",
+    )
+    p.add_argument("--busy", type=int, default=0,
+                   help="with --train: busy-looping processes beside the measurement, as on a "
+                   "shared machine (0; 0-64)")  # fmt: skip
     p.set_defaults(func=cmd_bench)
 
 
 def cmd_bench(args: argparse.Namespace) -> dict[str, Any]:
-    from wsp_env.evaluation.bench import run_bench
-
     if not 1 <= args.repeats <= 100:
         raise UserError(f"--repeats: must be 1-100, got {args.repeats}")
-    return run_bench(quick=args.quick, repeats=args.repeats)
+    if not args.train:
+        for flag, value, default in (("--config", args.config, None),
+                                     ("--rollouts", args.rollouts, 4),
+                                     ("--busy", args.busy, 0)):  # fmt: skip
+            if value != default:
+                raise UserError(f"{flag}: only with --train")
+        from wsp_env.evaluation.bench import run_bench
+
+        return run_bench(quick=args.quick, repeats=args.repeats)
+    if not 1 <= args.rollouts <= 100:
+        raise UserError(f"--rollouts: must be 1-100, got {args.rollouts}")
+    if not 0 <= args.busy <= 64:
+        raise UserError(f"--busy: must be 0-64, got {args.busy}")
+    from wsp_env.policy import require_extras
+
+    require_extras("bench --train needs", "rl")
+    from wsp_env.training.bench import DEFAULT_CONFIG, run_train_bench
+
+    return run_train_bench(args.config or DEFAULT_CONFIG, rollouts=args.rollouts,
+                           repeats=args.repeats, busy=args.busy, quick=args.quick)  # fmt: skip
 
 
 # ---- train ----------------------------------------------------------------------------------

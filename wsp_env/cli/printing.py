@@ -73,6 +73,11 @@ def print_calibrate(result: dict[str, Any]) -> None:
 
 
 def print_bench(result: dict[str, Any]) -> None:
+    if "wsp_env_steps_per_s" in result:  # --train
+        from wsp_env.training.bench import format_train_bench
+
+        print(format_train_bench(result))
+        return
     from wsp_env.evaluation.bench import format_bench
 
     print(format_bench(result))

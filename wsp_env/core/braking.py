@@ -25,6 +25,7 @@ import numpy as np
 from gymnasium import spaces
 from gymnasium.utils import seeding
 
+from wsp_env import threads
 from wsp_env.core import kernel as K
 from wsp_env.core.config import (
     OPTION_SPECS,
@@ -51,8 +52,6 @@ from wsp_env.core.sensors import (
 from wsp_env.core.simulator import RunSetup, TrainSim, draw_run_setup
 from wsp_env.physics import layout as L
 from wsp_env.physics.layout import CMD_HOLD
-
-PARALLEL_MIN_ENVS = 64
 
 
 @dataclass(frozen=True)
@@ -245,7 +244,10 @@ class BrakingCore:
         # one flag read per step once all are started (``_check_started``)
         self._started = np.zeros(n_envs, dtype=bool)
         self._all_started = False
-        self._step_fn = K.env_step_parallel if n_envs >= PARALLEL_MIN_ENVS else K.env_step_serial
+        # the thread policy (wsp_env.threads) says from how many environments the parallel
+        # path pays: from 64 without a learner in the process, never below 8 cores with one
+        parallel = n_envs >= threads.parallel_min_envs()
+        self._step_fn = K.env_step_parallel if parallel else K.env_step_serial
         # residual mode: the classical WSP runs beside the kernel; its requests for the coming
         # period are computed once per period, when the observation is first read after a step
         # or a reset (``obs``), so that it advances exactly once per control period

@@ -41,8 +41,19 @@ JUDGING_SUITES = ("heldout", "en15595")  # never used for model selection
 
 @dataclass(frozen=True)
 class EvalConfig:
+    """When the model is selected and the learning curve measured (``docs/training.md``).
+
+    ``every_timesteps``: the validation suite runs (model selection); ``first_timesteps``: the
+    first validation and the first checkpoint (0: a tenth of ``n_timesteps`` or
+    ``every_timesteps``, whichever is sooner, so a run stopped early leaves something).
+    ``curve_every_timesteps`` / ``curve_runs``: the fixed-seed learning curve, the first
+    ``curve_runs`` runs of the suite, deterministic, the same stops every time (0: curve off)."""
+
     suite: str = "validation"
     every_timesteps: int = field(default=500_000, metadata={"gt": 0})
+    first_timesteps: int = field(default=0, metadata={"ge": 0})
+    curve_every_timesteps: int = field(default=250_000, metadata={"ge": 0})
+    curve_runs: int = field(default=8, metadata={"gt": 0})
     # the judging suites (JUDGING_SUITES) are refused by name once loaded (Validator)
 
 

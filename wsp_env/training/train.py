@@ -10,8 +10,13 @@ written ``lin_3e-4``: linear from 3e-4 to 0), plus
 * ``env_kwargs``: ``WSPBraking-v0``'s keyword arguments (vehicle, action mode, valve grouping,
   reward exchange rates, the scenario distribution ``reset`` draws from, ...);
 * ``eval``: the periodic model selection — ``suite`` (default ``validation``; ``heldout`` is
-  refused: it is for final comparisons only) and ``every_timesteps``;
+  refused: it is for final comparisons only), ``every_timesteps`` and ``first_timesteps`` (the
+  first validation and checkpoint, early by default) — and the fixed-seed learning curve
+  (``curve_every_timesteps``, ``curve_runs``: ``LearningCurve``);
 * ``checkpoint_every_timesteps``.
+
+**Threads** (``wsp_env.threads``, role ``train``): the kernel serial below 8 cores, torch with
+1 thread while collecting and the measured best count while updating (``thread_switch``).
 
 Every field is checked before anything runs; a mistake is one line naming the file and field.
 
@@ -27,7 +32,8 @@ each reward term next to SB3's own. A fixed seed reproduces a run.
 
 **Output folder**: ``config.yaml`` (the exact config, seed included), ``model.zip`` +
 ``model.vecnormalize.pkl`` (final), ``best_model.zip`` + ``best_model.vecnormalize.pkl``,
-``checkpoints/step_N/``, ``validation.json`` (every evaluation), ``logs/from_step_N/`` (each
+``checkpoints/step_N/``, ``validation.json`` (every evaluation), ``curve.json`` (the
+learning curve), ``logs/from_step_N/`` (each
 call's TensorBoard events and CSV), ``progress.csv`` (all calls' CSV rows), ``train.json`` (the
 result, DESIGN §8).
 """
@@ -47,7 +53,9 @@ from typing import Any
 import numpy as np
 import yaml
 
-from wsp_env.core.config import ConfigError, read_yaml
+from wsp_env.core.config import ConfigError, load_vehicle, read_yaml
+from wsp_env.threads import AdaptiveThreads, thread_policy
+from wsp_env.threads import apply as apply_threads
 from wsp_env.training.config import (
     JUDGING_SUITES,
     OFF_POLICY,
@@ -71,6 +79,13 @@ def _make_venv(cfg: TrainConfig) -> Any:
     from wsp_env.agents.sb3_vec import SB3VecEnv
 
     return SB3VecEnv(num_envs=cfg.n_envs, **cfg.env_kwargs)
+
+
+def make_training_env(cfg: TrainConfig) -> Any:
+    """The environment a fresh run of ``cfg`` trains on: the native vector env through
+    ``SB3VecEnv``, ``VecNormalize`` and frame stacking as the config asks (``wsp-env bench
+    --train`` measures exactly this)."""
+    return _wrap_frame_stack(cfg, _wrap_normalize(cfg, _make_venv(cfg)))
 
 
 def _wrap_normalize(cfg: TrainConfig, venv: Any) -> Any:
@@ -161,6 +176,39 @@ def latest_checkpoint(run_dir: Path) -> Path | None:
     return max(found)[1] if found else None
 
 
+def thread_switch(adaptive: AdaptiveThreads) -> Any:
+    """An SB3 callback that gives torch the rollout's thread count while collecting and
+    ``adaptive``'s measured best one while updating (``threads.AdaptiveThreads``). Put it first
+    in a callback list: validation and checkpoints at a rollout's start are then not timed as
+    part of the update."""
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class ThreadSwitch(BaseCallback):
+        def __init__(self) -> None:
+            super().__init__()
+            self.updating = False
+
+        def _on_step(self) -> bool:
+            return True
+
+        def _on_rollout_end(self) -> None:  # the update follows
+            adaptive.begin_update()
+            self.updating = True
+
+        def _on_rollout_start(self) -> None:
+            self._end()
+
+        def _on_training_end(self) -> None:
+            self._end()
+
+        def _end(self) -> None:
+            if self.updating:
+                adaptive.end_update()
+                self.updating = False
+
+    return ThreadSwitch()
+
+
 def _callbacks(cfg: TrainConfig, out: Path, total: int, progress: bool, state: dict) -> Any:
     """The run's SB3 callbacks (defined here: SB3 is imported only when training)."""
     from stable_baselines3.common.callbacks import BaseCallback, CallbackList
@@ -195,19 +243,32 @@ def _callbacks(cfg: TrainConfig, out: Path, total: int, progress: bool, state: d
 
         def __init__(self) -> None:
             super().__init__()
-            self.next_ckpt = _next_multiple(state["start"], cfg.checkpoint_every_timesteps)
-            self.next_eval = _next_multiple(state["start"], cfg.eval.every_timesteps)
+            first = first_timesteps(cfg, total)
+            self.next_ckpt = next_due(state["start"], first, cfg.checkpoint_every_timesteps)
+            self.next_eval = next_due(state["start"], first, cfg.eval.every_timesteps)
+            curve_every = cfg.eval.curve_every_timesteps
+            # the curve's points are the multiples of its cadence, step 0 included (the
+            # untrained or imitation policy); a chunk ending on one leaves it to the resume
+            start, self.next_curve = state["start"], None
+            if curve_every:
+                have = {h["timesteps"] for h in state["curve"].history}
+                due_now = start % curve_every == 0 and start not in have
+                self.next_curve = start if due_now else next_due(start, 0, curve_every)
 
         def _on_step(self) -> bool:
             return True
 
         def _on_rollout_start(self) -> None:
             n = self.model.num_timesteps
+            first = first_timesteps(cfg, total)
+            if self.next_curve is not None and n >= self.next_curve:
+                self.next_curve = next_due(n, 0, cfg.eval.curve_every_timesteps)
+                state["curve"].evaluate(self.model, self.logger)
             if n >= self.next_eval:
-                self.next_eval = _next_multiple(n, cfg.eval.every_timesteps)
+                self.next_eval = next_due(n, first, cfg.eval.every_timesteps)
                 state["validator"].evaluate(self.model, self.logger)
             if n >= self.next_ckpt:
-                self.next_ckpt = _next_multiple(n, cfg.checkpoint_every_timesteps)
+                self.next_ckpt = next_due(n, first, cfg.checkpoint_every_timesteps)
                 _save_checkpoint(self.model, cfg, out / "checkpoints" / f"step_{n}")
 
     class Progress(BaseCallback):
@@ -227,13 +288,25 @@ def _callbacks(cfg: TrainConfig, out: Path, total: int, progress: bool, state: d
             self.bar.n = self.model.num_timesteps
             self.bar.close()
 
-    cbs = [EpisodeMetrics(), Periodic()]
+    cbs = [thread_switch(state["threads"]), EpisodeMetrics(), Periodic()]
     if progress:
         cbs.append(Progress())
     return CallbackList(cbs)
 
 
-def _next_multiple(n: int, every: int) -> int:
+def first_timesteps(cfg: TrainConfig, total: int) -> int:
+    """The first validation's and checkpoint's step: ``eval.first_timesteps``, or (0) a tenth
+    of the run's total or ``eval.every_timesteps``, whichever is sooner."""
+    if cfg.eval.first_timesteps:
+        return cfg.eval.first_timesteps
+    return max(1, min(cfg.eval.every_timesteps, total // 10))
+
+
+def next_due(n: int, first: int, every: int) -> int:
+    """The first step after ``n`` in the schedule ``first, every, 2 every, ...`` (``first`` 0 or
+    at least ``every``: the multiples of ``every``)."""
+    if n < first < every:
+        return first
     return (n // every + 1) * every
 
 
@@ -295,6 +368,78 @@ class Validator:
         from wsp_env.files import write_json
 
         write_json(self.out / "validation.json", payload)
+        return row
+
+
+class LearningCurve:
+    """The fixed-seed learning curve: the current policy, deterministic, on the first
+    ``eval.curve_runs`` runs of the validation suite (the same stops every time), beside the
+    classical WSP's constant line and locked wheels (the score's ends, as the benchmark's:
+    ``evaluation.benchmark.score``). Rows go to ``curve.json`` and the logger (``curve/*``);
+    unlike SB3's rollout means, no row depends on which episodes happened to end."""
+
+    def __init__(self, validator: Validator, resume_step: int = 0) -> None:
+        from wsp_env.evaluation import expand
+        from wsp_env.evaluation.runner import run_runs
+        from wsp_env.policy import make_policy
+
+        self.validator = validator
+        cfg = validator.cfg
+        veh = load_vehicle(validator.vehicle)
+        self.runs = expand(validator.suite, veh)[: cfg.eval.curve_runs]
+        self.vehicle = veh
+        ends = {}
+        for name in ("none", "classical"):
+            res, _ = run_runs(veh, self.runs, make_policy(name), env_kwargs=validator.env_kwargs)
+            ends[name] = res
+        self.none = np.array([r["return"] for r in ends["none"]])
+        self.classical_results = ends["classical"]
+        self.classical = self._row(ends["classical"])
+        self.history: list[dict[str, Any]] = []
+        path = validator.out / "curve.json"
+        if path.exists():  # a resumed run keeps its curve up to where it resumes
+            saved = json.loads(path.read_text())
+            self.history = [h for h in saved["history"] if h["timesteps"] <= resume_step]
+
+    def _row(self, results: list[dict[str, Any]]) -> dict[str, Any]:
+        from wsp_env.evaluation.benchmark import score
+
+        r = np.array([x["return"] for x in results])
+        sc = score(r, self.none, np.array([x["return"] for x in self.classical_results]))
+        stops = np.array([x["stopping_distance_m"] for x in results])
+        cls_stops = np.array([x["stopping_distance_m"] for x in self.classical_results])
+        return {
+            "score": sc["score"],
+            "score_mean": sc.get("score_mean"),
+            "scored_runs": sc["scored_runs"],
+            "mean_return": float(r.mean()),
+            "mean_stopping_distance_m": float(stops.mean()),
+            "stop_vs_classical": float(stops.mean() / max(cls_stops.mean(), 1e-9)),
+            "passed": int(sum(bool(x["passed"]) for x in results)),
+            "watchdog_runs": int(sum(x["watchdog"]["total"] > 0 for x in results)),
+        }
+
+    def evaluate(self, model: Any, logger: Any = None) -> dict[str, Any]:
+        from wsp_env.evaluation.runner import run_runs
+        from wsp_env.files import write_json
+        from wsp_env.policy import SB3Policy
+
+        v = self.validator
+        policy = SB3Policy.from_model(model, v.cfg.env_kwargs, name="current",
+                                      n_stack=v.cfg.frame_stack)  # fmt: skip
+        kwargs = {**v.env_kwargs, **policy.env_kwargs}
+        res, _ = run_runs(self.vehicle, self.runs, policy, env_kwargs=kwargs)
+        row = {"timesteps": int(model.num_timesteps), **self._row(res)}
+        self.history.append(row)
+        if logger is not None:
+            for k in ("score", "mean_return", "mean_stopping_distance_m", "stop_vs_classical",
+                      "passed"):  # fmt: skip
+                if row[k] is not None:
+                    logger.record(f"curve/{k}", row[k])
+        payload = {"suite": v.suite.name, "runs": [r.seed for r in self.runs],
+                   "cases": [r.scenario for r in self.runs], "classical": self.classical,
+                   "history": self.history}  # fmt: skip
+        write_json(v.out / "curve.json", payload)
         return row
 
 
@@ -365,6 +510,8 @@ def train(
         if out.exists() and any(out.iterdir()):
             raise ConfigError(f"{out}: exists and is not empty (use --resume {out} to continue)")
     cls = algo_class(cfg.algo)
+    # before the environments are built: the kernel's serial or parallel path is chosen then
+    policy_threads = apply_threads(thread_policy("train"))
     venv = _make_venv(cfg)
     started = time.perf_counter()
     if resume is not None:
@@ -399,6 +546,7 @@ def train(
     # the validation suite is checked (and the classical WSP run on it) before anything is
     # written; a resumed run's history is read from the folder it resumes
     validator = Validator(cfg, resume if resume is not None else out, resume_step=start)
+    curve = LearningCurve(validator, start) if cfg.eval.curve_every_timesteps else None
     validator.out = out
     if resume is None:
         out.mkdir(parents=True, exist_ok=True)
@@ -425,7 +573,15 @@ def train(
             write_json(out / "pretrain.json", pretrained)
         formats = ["csv"] + (["tensorboard"] if _have_tensorboard() else [])
         model.set_logger(configure(str(out / "logs" / f"from_step_{start}"), formats))
-        callbacks = _callbacks(cfg, out, total, progress, {"start": start, "validator": validator})
+        adaptive = AdaptiveThreads(policy_threads.update_torch_threads,
+                                   policy_threads.rollout_torch_threads)  # fmt: skip
+        callbacks = _callbacks(
+            cfg,
+            out,
+            total,
+            progress,
+            {"start": start, "validator": validator, "curve": curve, "threads": adaptive},
+        )
         remaining = max(total - start, 0)
         if chunk_timesteps is not None:
             remaining = min(remaining, chunk_timesteps)
@@ -436,6 +592,13 @@ def train(
         learn_wall = wall - (pretrained["wall_time_s"] if pretrained is not None else 0.0)
         steps = int(model.num_timesteps) - start
         final = validator.evaluate(model)
+        n_now = int(model.num_timesteps)
+        if (
+            curve is not None
+            and n_now >= total
+            and (not curve.history or curve.history[-1]["timesteps"] != n_now)
+        ):  # the curve's last point where the run ends (not a chunk's end: a resumed run's
+            curve.evaluate(model)  # curve is the one-go run's, row for row)
         save_policy_files(model, out / "model", cfg)
         _save_checkpoint(model, cfg, out / "checkpoints" / f"step_{model.num_timesteps}")
         merge_progress(out)
@@ -455,7 +618,10 @@ def train(
             "final_validation": final,
             "classical_validation": validator.classical,
             "validation_suite": validator.suite.name,
+            "threads": {**policy_threads.as_dict(), "update": adaptive.as_dict()},
         }
+        if curve is not None:
+            result["curve"] = {"classical": curve.classical, "last": curve.history[-1:]}
         if pretrained is not None:
             result["pretrain_env_steps"] = pretrained["env_steps"]
             result["pretrain_wall_time_s"] = pretrained["wall_time_s"]
@@ -528,13 +694,18 @@ def _have_tensorboard() -> bool:
 
 
 __all__ = [
+    "LearningCurve",
     "LinearSchedule",
     "TrainConfig",
     "Validator",
+    "first_timesteps",
     "latest_checkpoint",
     "load_train_config",
+    "make_training_env",
     "merge_progress",
+    "next_due",
     "parse_train_config",
     "save_policy_files",
+    "thread_switch",
     "train",
 ]
