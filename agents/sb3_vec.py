@@ -10,7 +10,32 @@ At an episode's end ``infos[i]["episode"]`` carries ``{"r", "l", "t"}`` as ``Vec
 it (the undiscounted return of the environment's own reward, before any ``VecNormalize``; the
 length in steps; seconds since the adapter was made), so SB3 logs episode statistics without a
 ``VecMonitor``. ``seed()`` and ``set_options()`` (SB3's ``VecEnv`` API: one seed for all, or
-per-environment options) take effect at the next ``reset()``.
+per-environment options) take effect at the next ``reset()``. With ``render_mode="rgb_array"``
+``get_images()`` gives every environment's frame (so SB3's ``render()`` tiles them).
+
+**Per-environment attributes and methods.** SB3's ``get_attr`` / ``set_attr`` / ``env_method``
+address environments one by one; here the environments are rows of one batched core
+(``self.venv.core``, a ``BrakingCore``). The rule:
+
+* ``get_attr(name, indices)`` looks ``name`` up on the vector env, then on its core. For the
+  names in ``PER_ENV_ATTRS`` (the batch's per-environment state: first axis = environment) it
+  returns, for each index ``i``, env ``i``'s entry (``value[i]``: a row of the batch's array is
+  a view of it). ``observation_space`` / ``action_space`` are one environment's spaces (the
+  vector env's ``single_*``), as ``DummyVecEnv``'s environments have them. Any other attribute
+  is **shared** by the batch: the same object for every index (``render_mode``, ``spec``,
+  ``metadata``, ``num_envs``, the core's configs; the core's other batched arrays whole, to be
+  indexed by the caller). A name found on neither is an ``AttributeError`` naming it.
+  Shapes are not used to guess which attribute is per environment: ``num_envs`` equal to the
+  number of axles (4) would make the valve map ``valve_of_axle`` look batched.
+* ``set_attr(name, value, indices)``: a ``PER_ENV_ATTRS`` name writes ``value`` into env ``i``'s
+  entry for each index; any other name sets the shared attribute (where ``get_attr`` finds it,
+  else on the vector env) and only for every environment at once (``indices`` None or all of
+  them): otherwise an ``AttributeError`` naming it.
+* ``env_method(name, *args, indices, **kwargs)``: the core's queries of one environment
+  (``PER_ENV_METHODS``: their first argument is the environment index ``e``) are called once
+  per index, ``core.name(i, *args, **kwargs)``. Any other method acts on the whole batch
+  (``reset``, ``step``, ``render``, ...) and cannot be called per environment: an
+  ``AttributeError`` naming it.
 """
 
 from __future__ import annotations
@@ -19,10 +44,24 @@ import time
 from typing import Any
 
 import numpy as np
-from gymnasium.utils import seeding
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv
 
 from wsp_env.envs import WSPBrakingVectorEnv
+
+# the batch's per-environment state that get_attr / set_attr address env by env (first axis =
+# environment): the vector env's step counts, then the core's
+PER_ENV_ATTRS = (
+    "episode_steps", "obs", "terms", "episode_return", "episode_terms", "prev_action",
+    "reference_speed_mps", "measured_wheel_speed_mps", "accelerometer_reading_mps2", "rngs",
+)  # fmt: skip
+# the core's queries of one environment (first argument: its index) that env_method calls per
+# index
+PER_ENV_METHODS = ("episode_info", "watchdog_interventions", "describe", "final_obs")
+# what get_attr gives for the spaces: one environment's, as DummyVecEnv's environments have them
+SINGLE_SPACES = {
+    "observation_space": "single_observation_space",
+    "action_space": "single_action_space",
+}
 
 
 class SB3VecEnv(VecEnv):
@@ -42,15 +81,8 @@ class SB3VecEnv(VecEnv):
         ``set_options()`` if given (then forgotten, as SB3's own ``VecEnv`` does)."""
         seeds = list(self._seeds)
         options = [dict(o) if o else None for o in self._options]
-        if all(o == options[0] for o in options):
-            any_seed = any(x is not None for x in seeds)
-            obs, _ = self.venv.reset(seed=seeds if any_seed else None, options=options[0])
-        else:  # per-environment options: each env seeded and reset with its own
-            core = self.venv.core
-            for i, (seed, opts) in enumerate(zip(seeds, options, strict=True)):
-                core.rngs[i] = seeding.np_random(seed)[0]
-                core.reset_env(i, opts)
-            obs = core.obs.copy()
+        any_seed = any(x is not None for x in seeds)
+        obs, _ = self.venv.reset(seed=seeds if any_seed else None, options=options)
         self._reset_seeds()
         self._reset_options()
         self._lengths[:] = 0
@@ -86,13 +118,57 @@ class SB3VecEnv(VecEnv):
         self.venv.close()
 
     def get_attr(self, attr_name: str, indices: Any = None) -> list[Any]:
-        return [getattr(self.venv, attr_name)] * len(self._indices(indices))
+        """Per environment for ``PER_ENV_ATTRS``, else the batch's shared value for every index
+        (module docstring)."""
+        idx = self._indices(indices)
+        if attr_name in SINGLE_SPACES:
+            return [getattr(self.venv, SINGLE_SPACES[attr_name])] * len(idx)
+        value = getattr(self._owner(attr_name), attr_name)
+        if attr_name in PER_ENV_ATTRS:
+            return [value[i] for i in idx]
+        return [value] * len(idx)
 
     def set_attr(self, attr_name: str, value: Any, indices: Any = None) -> None:
-        setattr(self.venv, attr_name, value)
+        """Env ``i``'s entry for ``PER_ENV_ATTRS``, else the shared attribute for every
+        environment at once (module docstring)."""
+        idx = self._indices(indices)
+        if attr_name in PER_ENV_ATTRS:
+            target = getattr(self._owner(attr_name), attr_name)
+            for i in idx:
+                target[i] = value
+            return
+        if sorted(set(idx)) != list(range(self.num_envs)):
+            raise AttributeError(
+                f"set_attr: {attr_name!r} is shared by the batch's environments: set it for all "
+                f"of them (indices=None); per environment: {', '.join(PER_ENV_ATTRS)}"
+            )
+        owner = self._find(attr_name)
+        setattr(self.venv if owner is None else owner, attr_name, value)
 
-    def env_method(self, method_name: str, *args: Any, indices: Any = None, **kwargs: Any) -> list:
-        return [getattr(self.venv, method_name)(*args, **kwargs)] * len(self._indices(indices))
+    def env_method(
+        self, method_name: str, *method_args: Any, indices: Any = None, **method_kwargs: Any
+    ) -> list[Any]:
+        """``core.method_name(i, *args, **kwargs)`` for each index, for ``PER_ENV_METHODS``
+        (module docstring)."""
+        idx = self._indices(indices)
+        if method_name in PER_ENV_METHODS:
+            method = getattr(self.venv.core, method_name)
+            return [method(i, *method_args, **method_kwargs) for i in idx]
+        if self._find(method_name) is not None:
+            raise AttributeError(
+                f"env_method: {method_name!r} acts on the whole batch, not on one environment: "
+                f"call it on SB3VecEnv.venv or .venv.core; per environment: "
+                f"{', '.join(PER_ENV_METHODS)}"
+            )
+        raise AttributeError(
+            f"env_method: {method_name!r}: no such method (per environment: "
+            f"{', '.join(PER_ENV_METHODS)})"
+        )
+
+    def get_images(self) -> list[np.ndarray | None]:
+        """Every environment's frame (``render_mode="rgb_array"``), else ``None`` each."""
+        frames = self.venv.render()
+        return [None] * self.num_envs if frames is None else list(frames)
 
     def env_is_wrapped(self, wrapper_class: type, indices: Any = None) -> list[bool]:
         return [False] * len(self._indices(indices))
@@ -100,6 +176,24 @@ class SB3VecEnv(VecEnv):
     def _indices(self, indices: Any) -> list[int]:
         if indices is None:
             return list(range(self.num_envs))
-        if isinstance(indices, int):
-            return [indices]
-        return list(indices)
+        if isinstance(indices, int | np.integer):
+            return [int(indices)]
+        return [int(i) for i in indices]
+
+    def _find(self, name: str) -> Any:
+        """The vector env if it has ``name``, else its core if that has it, else None (no
+        property is evaluated to find out)."""
+        for owner in (self.venv, self.venv.core):
+            if hasattr(type(owner), name) or name in vars(owner):
+                return owner
+        return None
+
+    def _owner(self, name: str) -> Any:
+        """``_find``, or an ``AttributeError`` naming ``name``."""
+        owner = self._find(name)
+        if owner is None:
+            raise AttributeError(
+                f"{name!r}: neither the vector env (WSPBrakingVectorEnv) nor its core "
+                "(BrakingCore) has it"
+            )
+        return owner

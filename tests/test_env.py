@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import warnings
 
 import gymnasium as gym
@@ -190,6 +191,135 @@ def test_render_rgb_array():
     img = env.render()
     assert img.ndim == 3 and img.shape[2] == 3 and img.dtype == np.uint8
     assert img.std() > 10  # not a blank image
+    assert set(WSPBrakingEnv.metadata["render_modes"]) == {"human", "rgb_array"}
+
+
+def test_render_reuses_one_figure_and_shows_a_capped_history():
+    """One figure for every frame; frames change as the env steps, their shape does not; the
+    history holds the last 10 s (501 rows at 20 ms) and starts anew at reset; nothing is kept
+    without a render_mode; close() drops the figure."""
+    env = WSPBrakingEnv(render_mode="rgb_array")
+    env.reset(seed=0, options={"rail": "soap", "speed_kmh": 120.0})
+    history = env.render_history
+    assert history.length[0] == 1
+    first = env.render()
+    figure = env.renderer.figure
+    frames = [first]
+    for _ in range(600):  # 12 s
+        env.step(np.ones(4, dtype=np.float32))
+        if len(frames) < 3:
+            frames.append(env.render())
+    assert history.capacity == 501 and history.length[0] == 501
+    rows = history.window(0)
+    assert np.all(np.diff(rows[:, 0]) > 0)  # oldest first, in time order
+    assert rows[-1, 0] == pytest.approx(env.core.sim.time_s[0])
+    assert rows[-1, 0] - rows[0, 0] == pytest.approx(10.0)
+    frames.append(env.render())
+    assert env.renderer.figure is figure
+    assert all(f.shape == first.shape == (480, 640, 3) for f in frames)
+    assert all(np.any(a != b) for a, b in itertools.pairwise(frames))
+    env.reset(seed=1)
+    assert history.length[0] == 1 and env.renderer.figure is figure
+    env.close()
+    assert env.renderer.figure is None
+    plain = WSPBrakingEnv()
+    assert plain.render_history is None and plain.render() is None
+    with pytest.raises(ValueError, match="render_mode"):
+        WSPBrakingEnv(render_mode="rgb_array_list")
+
+
+def test_vector_render_frames_per_env_on_one_figure():
+    venv = WSPBrakingVectorEnv(num_envs=2, render_mode="rgb_array")
+    venv.reset(seed=0, options={"rail": "soap", "speed_kmh": 100.0})
+    for _ in range(20):
+        venv.step(np.ones((2, 4), dtype=np.float32))
+    a, b = venv.render()
+    figure = venv.renderer.figure
+    assert a.shape == b.shape == (480, 640, 3) and np.any(a != b)  # two stops, two frames
+    venv.render()
+    assert venv.renderer.figure is figure and list(venv.render_history.length) == [21, 21]
+    venv.close()
+    with pytest.raises(ValueError, match="render_mode"):
+        WSPBrakingVectorEnv(num_envs=2, render_mode="human")
+
+
+def test_render_human_does_not_raise_headless():
+    """``render_mode="human"`` under MPLBACKEND=Agg (no window to show): steps draw, render()
+    returns None, close() works (a fresh interpreter, so the backend is the one chosen)."""
+    import os
+    import subprocess
+    import sys
+
+    code = (
+        "import numpy as np, gymnasium as gym, wsp_env\n"
+        "env = gym.make('WSPBraking-v0', render_mode='human')\n"
+        "env.reset(seed=0)\n"
+        "for _ in range(5): env.step(np.ones(4, dtype=np.float32))\n"
+        "assert env.render() is None\n"
+        "assert env.unwrapped.renderer.figure is not None\n"
+        "env.close()\n"
+        "import matplotlib.pyplot as plt; assert plt.get_fignums() == []\n"
+    )
+    run = subprocess.run(
+        [sys.executable, "-c", code],
+        env={**os.environ, "MPLBACKEND": "Agg"},
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
+    assert run.returncode == 0, run.stderr
+
+
+def test_spec_shows_the_step_limit_and_truncation_keeps_metrics():
+    """The made env's spec carries its own step limit (no TimeLimit: the ids register none);
+    truncation comes after exactly that many steps, with ``metrics``, also where a TimeLimit
+    rebuilt from the spec truncates on the same step; the vector env takes
+    ``max_episode_steps`` itself."""
+    assert gym.spec("WSPBraking-v0").max_episode_steps is None
+    assert gym.make("WSPBraking-v0").spec.max_episode_steps == 15000  # 300 s / 20 ms
+    assert gym.make("WSPBraking-UICZ1-v1").spec.max_episode_steps == 30000  # 600 s / 20 ms
+    assert gym.make("WSPBraking-v0", max_time_s=60.0).spec.max_episode_steps == 3000
+    venv = gym.make_vec("WSPBraking-v0", num_envs=2, vectorization_mode="vector_entry_point")
+    assert venv.spec.max_episode_steps == 15000
+    # a stop that lasts: 200 km/h on soap, every valve venting, no watchdog
+    slow = {"speed_kmh": 200.0, "rail": "soap", "gradient_permille": 0.0}
+    vent = np.full(4, -1.0, dtype=np.float32)
+
+    def run(env):
+        env.reset(seed=0, options=slow)
+        for n in range(1, 10_000):
+            _, _, terminated, truncated, info = env.step(vent)
+            if terminated or truncated:
+                return n, terminated, truncated, info
+        raise AssertionError("no end")
+
+    env = gym.make("WSPBraking-v0", max_time_s=1.0, watchdog={"enabled": False})
+    assert env.spec.max_episode_steps == 50
+    n, terminated, truncated, info = run(env)
+    assert (n, terminated, truncated) == (50, False, True) and "metrics" in info
+    assert info["metrics"]["stopping_time_s"] == pytest.approx(1.0)
+    rebuilt = gym.make(env.spec)  # a TimeLimit at 50: the same step as the env's own
+    assert "TimeLimit" in str(rebuilt)
+    n, _, truncated, info = run(rebuilt)
+    assert n == 50 and truncated and "metrics" in info
+    # 300 s: the float sum of the time stays under 300 s after 15,000 steps; the count ends it
+    env = WSPBrakingEnv(watchdog={"enabled": False}, max_time_s=300.0)
+    env.reset(seed=0, options={**slow, "gradient_permille": -20.0})
+    for n in range(1, 15_001):
+        _, _, terminated, truncated, info = env.step(vent)
+        assert not terminated and (truncated == (n == 15_000))
+    assert "metrics" in info and env.core.sim.time_s[0] < 300.0
+    # the vector env: max_episode_steps is its own step limit, final_info has the metrics
+    venv = gym.make_vec(
+        "WSPBraking-v0", num_envs=2, vectorization_mode="vector_entry_point", max_episode_steps=50
+    )
+    assert venv.spec.max_episode_steps == 50
+    venv.reset(seed=0, options=slow)
+    for n in range(1, 51):
+        _, _, terminated, truncated, info = venv.step(np.tile(vent, (2, 1)))
+        assert not terminated.any() and truncated.all() == (n == 50)
+    assert all("metrics" in info["final_info"][i] for i in range(2))
 
 
 def test_sb3_ppo_trains_on_the_batched_env():
@@ -319,3 +449,47 @@ def test_sb3_adapter_reports_episodes_and_takes_seeds_and_options():
     assert core.describe(1)["mu_contaminated"] == first  # same seed, same draw
     venv.reset()  # seeds and options are used once
     assert core.describe(0)["speed_kmh"] != 30.0 or core.describe(1)["speed_kmh"] != 50.0
+
+
+def test_sb3_adapter_get_attr_set_attr_env_method_per_env():
+    """The rule of ``agents/sb3_vec.py``: the batch's per-environment state per index, shared
+    attributes the same object for every index (whatever their shape: 4 envs, 4 axles),
+    the core's per-environment queries per index, batch-wide methods refused by name."""
+    from wsp_env.agents.sb3_vec import SB3VecEnv
+
+    venv = SB3VecEnv(num_envs=4)
+    core = venv.venv.core
+    venv.set_options([{"speed_kmh": 40.0 + 20.0 * i, "rail": "dry"} for i in range(4)])
+    venv.reset()
+    for _ in range(3):
+        venv.step_async(np.ones((4, 4), dtype=np.float32))
+        venv.step_wait()
+    ret = venv.get_attr("episode_return")
+    assert ret == [core.episode_return[i] for i in range(4)] and len(set(ret)) == 4
+    assert venv.get_attr("episode_steps", [1, 3]) == [3, 3]
+    ref = venv.get_attr("reference_speed_mps", 2)
+    assert ref == [core.reference_speed_mps[2]]
+    obs = venv.get_attr("obs", [0, 3])
+    assert np.array_equal(obs[0], core.obs[0]) and np.array_equal(obs[1], core.obs[3])
+    assert venv.get_attr("rngs", [1]) == [core.rngs[1]]
+    shared = venv.get_attr("valve_of_axle")  # (4,) with 4 envs: still shared, not sliced
+    assert all(v is core.valve_of_axle for v in shared) and len(shared) == 4
+    assert venv.get_attr("render_mode", [0, 1]) == [None, None]
+    assert venv.get_attr("observation_space", 0) == [venv.observation_space]
+    scen = venv.env_method("describe", indices=[0, 3])
+    assert [d["speed_kmh"] for d in scen] == [40.0, 100.0]
+    metrics = venv.env_method("episode_info", indices=1)
+    assert metrics[0]["episode_return"] == pytest.approx(core.episode_return[1])
+    assert venv.env_method("watchdog_interventions")[2] == core.watchdog_interventions(2)
+    venv.set_attr("episode_return", 0.0, indices=[1, 2])
+    assert list(core.episode_return[1:3]) == [0.0, 0.0] and core.episode_return[0] != 0.0
+    venv.set_attr("custom_flag", 7)  # shared: for all at once
+    assert venv.get_attr("custom_flag", [2]) == [7]
+    with pytest.raises(AttributeError, match="'custom_flag'"):
+        venv.set_attr("custom_flag", 8, indices=[0])
+    with pytest.raises(AttributeError, match="'no_such_thing'"):
+        venv.get_attr("no_such_thing")
+    with pytest.raises(AttributeError, match="'reset'"):
+        venv.env_method("reset", indices=[0])
+    with pytest.raises(AttributeError, match="'no_such_method'"):
+        venv.env_method("no_such_method")

@@ -1,6 +1,6 @@
 """The Gymnasium environments over the braking core: ``WSPBraking-v0`` single and native vector
-(``wsp_braking``), their ``rgb_array`` frames (``rendering``), and ``make_core``, the core as the
-environments build it (what evaluation, training and the rig build too)."""
+(``wsp_braking``), their ``rgb_array`` / ``human`` frames (``rendering``), and ``make_core``, the
+core as the environments build it (what evaluation, training and the rig build too)."""
 
 from wsp_env.core.braking import RewardConfig, ScenarioConfig
 from wsp_env.envs.wsp_braking import WSPBrakingEnv, WSPBrakingVectorEnv, make_core

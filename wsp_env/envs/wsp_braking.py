@@ -111,12 +111,26 @@ every wheel rolling, cylinders empty, the demand rising after the brake's delay.
 
 ## Episode End
 
-``terminated`` at standstill; ``truncated`` when ``max_time_s`` of braking has passed.
-``info["metrics"]`` at the end carries the run's metrics (``core.metrics.run_metrics``:
-stopping distance and time, sliding energy per axle, locks, air, ...). The vector class steps
-all environments in one compiled call and autoresets in the same step
-(``AutoresetMode.SAME_STEP``): an ended environment's last observation and info are in
-``info["final_obs"]`` / ``info["final_info"]`` (masks ``_final_obs`` / ``_final_info``).
+``terminated`` at standstill; ``truncated`` after ``max_episode_steps = ceil(max_time_s /
+control_period_s)`` steps (15,000 by default, 30,000 for the benchmark ids; counted, so the
+float sum of the simulated time cannot add a step). ``info["metrics"]`` at the end carries the
+run's metrics (``core.metrics.run_metrics``: stopping distance and time, sliding energy per
+axle, locks, air, ...). The vector class steps all environments in one compiled call and
+autoresets in the same step (``AutoresetMode.SAME_STEP``): an ended environment's last
+observation and info are in ``info["final_obs"]`` / ``info["final_info"]`` (masks
+``_final_obs`` / ``_final_info``).
+
+The limit is the environment's own, not a ``TimeLimit`` wrapper's (which would end a stop
+without its ``metrics``): the registered ids carry no ``max_episode_steps``, and the spec that
+``gymnasium.make`` / ``make_vec`` give the made environment carries its limit
+(``gymnasium.make("WSPBraking-v0").spec.max_episode_steps == 15000``; with ``max_time_s=60``,
+3000). ``gymnasium.make(env.spec)`` then adds a ``TimeLimit`` that truncates on the same step
+as the environment, so the final ``info`` is the environment's, with ``metrics``. A shorter
+limit through ``gymnasium.make(..., max_episode_steps=N)`` is a ``TimeLimit`` the environment
+cannot see (gymnasium does not pass ``N`` on): its truncating step's ``info`` has no
+``metrics``. Give ``max_time_s=N * control_period_s`` instead (the environment then truncates
+itself at step ``N``, with them), or read ``env.unwrapped.core.episode_info(0)``. The vector
+class takes ``max_episode_steps=N`` itself (``gymnasium.make_vec`` passes it on).
 
 ## Arguments
 
@@ -142,8 +156,8 @@ num_envs=N, **kwargs)``:
 | ``extra_rails`` | dict or None | None | further ``RailConfig`` objects by name |
 | ``control_period_s`` | float | ``0.02`` | the BCU cycle: one step |
 | ``substep_s`` | float | ``0.001`` | the physics substep (linearly implicit; docs/physics.md) |
-| ``max_time_s`` | float | ``300.0`` | truncation |
-| ``render_mode`` | str or None | None | ``"rgb_array"``: axle speeds and pressures as an image |
+| ``max_time_s`` | float | ``300.0`` | truncation after ``ceil(max_time_s / control_period_s)`` steps (Episode End) |
+| ``render_mode`` | str or None | None | ``"rgb_array"``: ``render()`` returns a frame, ``(480, 640, 3)`` uint8, of the last 10 s (wheel speeds against the train and the reference, slips, cylinder pressures against the demand; one figure reused, > 50 frames/s); ``"human"``: the same in a matplotlib window, updated at every step (with a non-interactive backend, e.g. ``MPLBACKEND=Agg`` or no display, drawn but not shown); ``wsp_env.envs.rendering`` |
 
 ## Version History
 
@@ -160,14 +174,22 @@ num_envs=N, **kwargs)``:
   every controller; the benchmark ids fix vehicle, sensor tier, sensor errors, the scenario
   distribution (gradients +-25 per mille, every rail, load, pads, speeds 40 km/h to the
   maximum), reward, watchdog and timing.
+* v1, later the same day (no new version: no scenario, observation or reward changed):
+  truncation is counted, after exactly ``ceil(max_time_s / control_period_s)`` steps (it came
+  one step later where the simulated time's float sum fell short of ``max_time_s``: 15,001
+  steps at 300 s); the made environment's ``spec.max_episode_steps`` is that limit; the
+  ``human`` render mode, and frames of the last 10 s on one reused figure.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import math
 from typing import Any, ClassVar
 
 import gymnasium as gym
 import numpy as np
+from gymnasium.envs.registration import EnvSpec
 from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
@@ -176,7 +198,7 @@ from wsp_env.core import kernel as K
 from wsp_env.core.braking import TERM_NAMES, BrakingCore, RewardConfig, ScenarioConfig
 from wsp_env.core.config import RailConfig, VehicleConfig
 from wsp_env.core.sensors import EstimatorConfig, SensorConfig, WatchdogConfig
-from wsp_env.envs.rendering import render_core
+from wsp_env.envs.rendering import FrameRenderer, RenderHistory
 
 
 def make_core(n_envs: int, **kwargs: Any) -> BrakingCore:
@@ -192,9 +214,24 @@ def make_core(n_envs: int, **kwargs: Any) -> BrakingCore:
     return BrakingCore(n_envs, **kwargs)
 
 
+def episode_step_limit(max_time_s: float, control_period_s: float) -> int:
+    """The steps after which a stop is truncated: ``max_time_s / control_period_s``, rounded up
+    (counted, so that it does not depend on how the simulated time's float sum rounds)."""
+    return math.ceil(round(max_time_s / control_period_s, 9))
+
+
+def _spec_with_limit(spec: EnvSpec | None, max_episode_steps: int) -> EnvSpec | None:
+    """``spec`` (what ``gymnasium.make`` / ``make_vec`` set) with the environment's own step
+    limit where it has none (no ``TimeLimit`` is involved: the environment truncates itself)."""
+    if spec is None or spec.max_episode_steps is not None:
+        return spec
+    return dataclasses.replace(spec, max_episode_steps=max_episode_steps)
+
+
 class WSPBrakingEnv(gym.Env):
     __doc__ = __doc__
-    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 50}
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["human", "rgb_array"], "render_fps": 50}
+    _spec: EnvSpec | None = None
 
     def __init__(
         self,
@@ -218,8 +255,8 @@ class WSPBrakingEnv(gym.Env):
         substep_s: float = 1e-3,
         max_time_s: float = 300.0,
     ) -> None:
-        if render_mode not in (None, "rgb_array"):
-            raise ValueError(f"render_mode: {render_mode!r} (supported: rgb_array)")
+        if render_mode not in (None, *self.metadata["render_modes"]):
+            raise ValueError(f"render_mode: {render_mode!r} (supported: human, rgb_array)")
         self.render_mode = render_mode
         self.core = make_core(
             1, vehicle=vehicle, action_mode=action_mode, residual_scale=residual_scale,
@@ -230,6 +267,28 @@ class WSPBrakingEnv(gym.Env):
         )  # fmt: skip
         self.action_space = self.core.action_space()
         self.observation_space = self.core.observation_space()
+        self.max_episode_steps = episode_step_limit(max_time_s, control_period_s)
+        self.elapsed_steps = 0
+        # rendering: the recent history a frame shows (kept only with a render_mode: nothing
+        # otherwise) and the figure it is drawn on (``wsp_env.envs.rendering``)
+        self.render_history: RenderHistory | None = None
+        self.renderer: FrameRenderer | None = None
+        if render_mode is not None:
+            self.render_history = RenderHistory(self.core)
+            self.renderer = FrameRenderer(
+                self.core, self.render_history, human=render_mode == "human"
+            )
+
+    @property
+    def spec(self) -> EnvSpec | None:
+        """The spec ``gymnasium.make`` set, its ``max_episode_steps`` this environment's own
+        limit (``max_episode_steps``: ``max_time_s / control_period_s``) unless a ``TimeLimit``
+        gave one."""
+        return self._spec
+
+    @spec.setter
+    def spec(self, spec: EnvSpec | None) -> None:
+        self._spec = _spec_with_limit(spec, self.max_episode_steps)
 
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
@@ -237,6 +296,12 @@ class WSPBrakingEnv(gym.Env):
         super().reset(seed=seed)
         self.core.rngs[0] = self.np_random
         info = self.core.reset_env(0, options)
+        self.elapsed_steps = 0
+        if self.render_history is not None:
+            self.render_history.clear(0)
+            self.render_history.record()
+            if self.render_mode == "human":
+                self.renderer.draw(0)
         return self.core.obs[0].copy(), info
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
@@ -247,32 +312,53 @@ class WSPBrakingEnv(gym.Env):
         reward = float(terms.sum())
         core.episode_return[0] += reward
         core.episode_terms[0] += terms
+        self.elapsed_steps += 1
         terminated = bool(core.flags[0, K.F_TERMINATED])
-        truncated = bool(core.flags[0, K.F_TRUNCATED])
+        truncated = not terminated and (
+            self.elapsed_steps >= self.max_episode_steps or bool(core.flags[0, K.F_TRUNCATED])
+        )
         info: dict[str, Any] = {
             "reward_terms": dict(zip(TERM_NAMES, terms.tolist(), strict=True)),
             "action_clipped": int(core.flags[0, K.F_CLIPPED]),
         }
         if terminated or truncated:
             info["metrics"] = core.episode_info(0)
+        if self.render_history is not None:
+            self.render_history.record()
+            if self.render_mode == "human":
+                self.renderer.draw(0)
         return core.obs[0].copy(), reward, terminated, truncated, info
 
     def render(self) -> np.ndarray | None:
-        if self.render_mode != "rgb_array":
+        """``rgb_array``: the current frame, ``(480, 640, 3)`` uint8; ``human``: draws it into
+        the window (each step does too) and returns None; no ``render_mode``: None."""
+        if self.renderer is None:
             return None
-        return render_core(self.core, 0)
+        if self.render_mode == "rgb_array":
+            return self.renderer.frame(0)
+        self.renderer.draw(0)
+        return None
+
+    def close(self) -> None:
+        """Close the rendering figure, if one was made."""
+        if self.renderer is not None:
+            self.renderer.close()
 
 
 class WSPBrakingVectorEnv(VectorEnv):
     """``num_envs`` environments stepped by one compiled call; same-step autoreset. Arguments
-    as ``WSPBrakingEnv`` (module docstring) plus ``num_envs``; ``max_episode_steps`` (what
-    ``gymnasium.make_vec`` passes from the spec) sets ``max_time_s`` when that is not given."""
+    as ``WSPBrakingEnv`` (module docstring) plus ``num_envs`` and ``max_episode_steps``: a step
+    limit (what ``gymnasium.make_vec`` passes on); without ``max_time_s`` it sets
+    ``max_time_s = max_episode_steps * control_period_s``, with both the earlier truncates.
+    ``render_mode``: ``"rgb_array"`` only (one frame per environment, drawn in turn on one
+    figure)."""
 
     metadata: ClassVar[dict[str, Any]] = {
         "render_modes": ["rgb_array"],
         "render_fps": 50,
         "autoreset_mode": AutoresetMode.SAME_STEP,
     }
+    _spec: EnvSpec | None = None
 
     def __init__(
         self,
@@ -298,7 +384,17 @@ class WSPBrakingVectorEnv(VectorEnv):
         substep_s: float = 1e-3,
         max_time_s: float | None = None,
     ) -> None:
-        if max_time_s is None:  # gymnasium passes the spec's step limit; ours is time-based
+        if render_mode not in (None, *self.metadata["render_modes"]):
+            raise ValueError(f"render_mode: {render_mode!r} (supported: rgb_array)")
+        if max_episode_steps is not None and (
+            isinstance(max_episode_steps, bool)
+            or not isinstance(max_episode_steps, int | np.integer)
+            or max_episode_steps < 1
+        ):
+            raise ValueError(
+                f"max_episode_steps: must be a positive integer, got {max_episode_steps!r}"
+            )
+        if max_time_s is None:
             steps = max_episode_steps
             max_time_s = 300.0 if steps is None else steps * control_period_s
         self.core = make_core(
@@ -314,10 +410,35 @@ class WSPBrakingVectorEnv(VectorEnv):
         self.single_observation_space = self.core.observation_space()
         self.action_space = batch_space(self.single_action_space, num_envs)
         self.observation_space = batch_space(self.single_observation_space, num_envs)
+        limit = episode_step_limit(max_time_s, control_period_s)
+        if max_episode_steps is not None:
+            limit = min(limit, int(max_episode_steps))
+        self.max_episode_steps = limit
+        self.episode_steps = np.zeros(num_envs, dtype=np.int64)  # steps of each env's stop
+        self.render_history: RenderHistory | None = None
+        self.renderer: FrameRenderer | None = None
+        if render_mode is not None:
+            self.render_history = RenderHistory(self.core)
+            self.renderer = FrameRenderer(self.core, self.render_history)
+
+    @property
+    def spec(self) -> EnvSpec | None:
+        """The spec ``gymnasium.make_vec`` set, its ``max_episode_steps`` this environment's
+        step limit (``max_episode_steps``) where the registration gives none."""
+        return self._spec
+
+    @spec.setter
+    def spec(self, spec: EnvSpec | None) -> None:
+        self._spec = _spec_with_limit(spec, self.max_episode_steps)
 
     def reset(
-        self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
+        self,
+        *,
+        seed: int | list[int | None] | None = None,
+        options: dict[str, Any] | list[dict[str, Any] | None] | None = None,
     ) -> tuple[np.ndarray, dict[str, Any]]:
+        """Start every environment anew: ``seed`` an int (env ``i`` gets ``seed + i``) or one
+        per environment; ``options`` one dict for all, or a list with one per environment."""
         if isinstance(seed, int):
             seeds: list[int | None] = [seed + i for i in range(self.num_envs)]
         elif seed is None:
@@ -326,9 +447,19 @@ class WSPBrakingVectorEnv(VectorEnv):
             if len(seed) != self.num_envs:
                 raise ValueError(f"seed: {len(seed)} seeds for {self.num_envs} environments")
             seeds = list(seed)
+        if isinstance(options, list | tuple):
+            if len(options) != self.num_envs:
+                raise ValueError(f"options: {len(options)} dicts for {self.num_envs} environments")
+            each = list(options)
+        else:
+            each = [options] * self.num_envs
         for i, s in enumerate(seeds):
             self.core.rngs[i] = seeding.np_random(s)[0]
-        scenarios = [self.core.reset_env(i, options)["scenario"] for i in range(self.num_envs)]
+        scenarios = [self.core.reset_env(i, each[i])["scenario"] for i in range(self.num_envs)]
+        self.episode_steps[:] = 0
+        if self.render_history is not None:
+            self.render_history.clear(slice(None))
+            self.render_history.record()
         return self.core.obs.copy(), {"scenario": np.array(scenarios, dtype=object)}
 
     def step(
@@ -340,8 +471,11 @@ class WSPBrakingVectorEnv(VectorEnv):
         rewards = core.terms.sum(axis=1)
         core.episode_return += rewards
         core.episode_terms += core.terms
+        self.episode_steps += 1
         terminated = core.flags[:, K.F_TERMINATED].astype(bool)
         truncated = core.flags[:, K.F_TRUNCATED].astype(bool)
+        truncated |= self.episode_steps >= self.max_episode_steps
+        truncated &= ~terminated
         info: dict[str, Any] = {
             "reward_terms": {n: core.terms[:, i].copy() for i, n in enumerate(TERM_NAMES)},
             "action_clipped": core.flags[:, K.F_CLIPPED].copy(),
@@ -356,12 +490,23 @@ class WSPBrakingVectorEnv(VectorEnv):
                 final_obs[e] = core.final_obs(int(e))
                 final_info[e] = {"metrics": core.episode_info(e), "scenario": core.describe(e)}
                 core.reset_env(int(e), None)
+            self.episode_steps[ended] = 0
             info.update(
                 final_obs=final_obs, _final_obs=mask, final_info=final_info, _final_info=mask.copy()
             )
+            if self.render_history is not None:
+                self.render_history.clear(ended)
+        if self.render_history is not None:
+            self.render_history.record()
         return core.obs.copy(), rewards, terminated, truncated, info
 
     def render(self) -> tuple[np.ndarray, ...] | None:
-        if self.render_mode != "rgb_array":
+        """``rgb_array``: every environment's frame (``WSPBrakingEnv.render``); else None."""
+        if self.renderer is None:
             return None
-        return tuple(render_core(self.core, e) for e in range(self.num_envs))
+        return tuple(self.renderer.frame(e) for e in range(self.num_envs))
+
+    def close_extras(self, **kwargs: Any) -> None:
+        """Close the rendering figure, if one was made."""
+        if self.renderer is not None:
+            self.renderer.close()
