@@ -7,6 +7,7 @@ Everything is batched over environments, so one evaluation code path serves all 
 
 from __future__ import annotations
 
+import contextlib
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -43,8 +44,16 @@ class NoWSP:
         return np.ones(self._shape, dtype=np.float32)
 
 
+# a trained model acts on blocks of this many observations, the last one padded: torch's CPU
+# matrix products pick their code path by the batch's size, so an environment's actions would
+# otherwise depend on how many others were evaluated with it (one process or split across
+# workers, a suite or one stop). With one block size they do not (tests/test_distributed.py).
+INFERENCE_BLOCK = 64
+
+
 class SB3Policy:
-    """A trained stable-baselines3 model (``.zip``), deterministic actions.
+    """A trained stable-baselines3 model (``.zip``), deterministic actions, computed on blocks
+    of ``INFERENCE_BLOCK`` observations (an environment's actions do not depend on the batch).
 
     Found next to the model and applied: its observation normalisation — ``STEM.vecnormalize.pkl``
     (what ``wsp-env train`` writes beside every model and checkpoint), else SB3's checkpoint
@@ -183,13 +192,39 @@ class SB3Policy:
             self._stack[:, :-width] = self._stack[:, width:]
             self._stack[:, -width:] = x
             x = self._stack.copy()
+        n = x.shape[0]
+        pad = (-n) % INFERENCE_BLOCK
+        if pad:
+            x = np.concatenate([x, np.zeros((pad, x.shape[1]), dtype=x.dtype)])
+        blocks = range(0, n + pad, INFERENCE_BLOCK)
         if self.recurrent:
-            action, self._state = self.model.predict(
-                x, state=self._state, episode_start=self._episode_start, deterministic=True
+            start = np.concatenate([self._episode_start, np.ones(pad, dtype=bool)])
+            state = self._state
+            if state is not None and pad:
+                state = tuple(np.concatenate([h, np.zeros((h.shape[0], pad, *h.shape[2:]),
+                                                          dtype=h.dtype)], axis=1)
+                              for h in state)  # fmt: skip
+            actions, states = [], []
+            for b in blocks:
+                part = slice(b, b + INFERENCE_BLOCK)
+                a, st = self.model.predict(
+                    x[part], state=None if state is None else tuple(h[:, part] for h in state),
+                    episode_start=start[part], deterministic=True,
+                )  # fmt: skip
+                actions.append(a)
+                states.append(st)
+            action = np.concatenate(actions)[:n]
+            self._state = tuple(
+                np.concatenate(hs, axis=1)[:, :n] for hs in zip(*states, strict=True)
             )
             self._episode_start[:] = False
         else:
-            action, _ = self.model.predict(x, deterministic=True)
+            action = np.concatenate(
+                [
+                    self.model.predict(x[b : b + INFERENCE_BLOCK], deterministic=True)[0]
+                    for b in blocks
+                ]
+            )[:n]
         return np.asarray(action, dtype=np.float64 if self._discrete else np.float32)
 
 
@@ -455,7 +490,18 @@ def make_policy(name_or_path: str, wsp_config: str | None = None, tier: str = "w
     """``classical`` (the frozen classical WSP of sensor ``tier``: ``wheels`` or
     ``wheels+accel``), ``none``, ``oracle``, a shipped policy's name (``agents/pretrained``), a
     path to a trained model file, or ``module:callable`` (``load_callable_policy``). Model files
-    are pickles, and a module runs code: load only what you trust."""
+    are pickles, and a module runs code: load only what you trust.
+
+    The policy keeps its arguments as ``policy.spec`` (where it takes attributes), so that an
+    evaluation split across workers can build it again there
+    (``evaluation.distributed.PolicySpec``)."""
+    policy = _make_policy(name_or_path, wsp_config, tier)
+    with contextlib.suppress(AttributeError, TypeError):
+        policy.spec = (name_or_path, wsp_config, tier)
+    return policy
+
+
+def _make_policy(name_or_path: str, wsp_config: str | None, tier: str) -> Any:
     if name_or_path == "none":
         return NoWSP()
     if name_or_path == "classical":

@@ -120,7 +120,7 @@ def thread_policy(role: Role = "evaluate", cores: int | None = None) -> ThreadPo
     if n < 1:
         raise ThreadPolicyError(f"cores: {n} (must be >= 1)")
     if role == "evaluate":
-        numba, par_min = n, 64
+        numba, par_min = n, (64 if n > 1 else NEVER)
     elif n >= 8:
         numba, par_min = n // 2, 256
     else:

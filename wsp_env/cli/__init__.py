@@ -7,8 +7,10 @@ or argument, and exit status 2 — never a traceback, never a half-written outpu
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any, NoReturn
 
@@ -334,7 +336,33 @@ def _add_evaluate(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--json", dest="json_path", default=None, help="write the result here")
     p.add_argument("--report", default=None, help="write report.md and plots into this folder")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    _add_worker_args(p)
     p.set_defaults(func=cmd_evaluate)
+
+
+def _add_worker_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--workers", type=int, default=None,
+                   help="split the stops across N worker processes through Ray (local; "
+                   "needs the sweep extra); the result is the one-process result, run for "
+                   "run")  # fmt: skip
+    p.add_argument("--address", default=None,
+                   help="attach to a running Ray cluster (auto or HOST:PORT; see `wsp-env sweep "
+                   "--help`) and split the stops across its CPUs (or --workers N)")  # fmt: skip
+
+
+@contextlib.contextmanager
+def _executor(args: argparse.Namespace) -> Iterator[Any]:
+    """None (run here), or a Ray executor for --workers / --address for the ``with``."""
+    if args.workers is None and args.address is None:
+        yield None
+        return
+    if args.workers is not None and not 1 <= args.workers <= 4096:
+        raise UserError(f"--workers: must be 1-4096, got {args.workers}")
+    from wsp_env.evaluation.distributed import RayExecutor, ray_session
+
+    with ray_session(args.address, args.workers) as ray:
+        n = args.workers or max(1, int(ray.cluster_resources().get("CPU", 1)))
+        yield RayExecutor(ray, n)
 
 
 def cmd_evaluate(args: argparse.Namespace) -> dict[str, Any]:
@@ -363,14 +391,15 @@ def cmd_evaluate(args: argparse.Namespace) -> dict[str, Any]:
                        "privileged", "control_period_s")  # fmt: skip
     report_tmp = _reserve(args, "report", "--report", "dir")
     results, records = [], {}
-    for pol in policies:
-        res, rec = run_suite(
-            args.vehicle, suite, pol, record="first_seed" if args.report else "none",
-            progress=not args.no_progress and sys.stderr.isatty(), env_kwargs=env_kwargs,
-            policy_keys=policy_keys,
-        )  # fmt: skip
-        results.extend(res)
-        records[pol.name] = rec
+    with _executor(args) as executor:
+        for pol in policies:
+            res, rec = run_suite(
+                args.vehicle, suite, pol, record="first_seed" if args.report else "none",
+                progress=not args.no_progress and sys.stderr.isatty(), env_kwargs=env_kwargs,
+                policy_keys=policy_keys, executor=executor,
+            )  # fmt: skip
+            results.extend(res)
+            records[pol.name] = rec
     summary = summarise(results)
     payload = {
         "suite": suite.name,
@@ -419,6 +448,7 @@ def _add_benchmark(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--json", dest="json_path", default=None, help="write the result here")
     p.add_argument("--report", default=None, help="write report.md into this folder")
     p.add_argument("--no-progress", action="store_true", help="no progress lines")
+    _add_worker_args(p)
     p.set_defaults(func=cmd_benchmark)
 
 
@@ -441,7 +471,10 @@ def cmd_benchmark(args: argparse.Namespace) -> dict[str, Any]:
         if not args.no_progress:
             print(line, file=sys.stderr, flush=True)
 
-    payload = run_benchmark(policies, args.vehicle, args.tier, runs, progress)
+    with _executor(args) as executor:
+        payload = run_benchmark(
+            policies, args.vehicle, args.tier, runs, progress, executor=executor
+        )
     if report_tmp is not None:
         from wsp_env.evaluation.report import write_benchmark_report
 

@@ -189,9 +189,12 @@ def run_benchmark(
     runs: int = SEALED_RUNS,
     progress: Callable[[str], None] | None = None,
     keep_runs: bool = True,
+    executor: Any = None,
 ) -> dict[str, Any]:
     """Score ``policies`` (``policy.make_policy`` objects) on the sealed set of ``vehicle`` in
     sensor ``tier``: ``none`` and the tier's classical WSP run too (the score's ends).
+    ``executor``: as ``runner.run_suite``'s (``distributed.RayExecutor``: the stops split
+    across workers, the same payload).
 
     A policy whose sensors are not the tier's (a learned model trained with or without the
     accelerometer) is refused: one line naming it."""
@@ -228,7 +231,7 @@ def run_benchmark(
     for p in todo:
         if progress is not None:
             progress(f"{env_id(vehicle, tier)}: {p.name} on {len(stops)} stops")
-        res, _ = run_runs(
+        res, _ = (run_runs if executor is None else executor.run_runs)(
             veh, stops, p, record="none", max_time_s=max_time_s,
             env_kwargs=kwargs, policy_keys=POLICY_KEYS,
         )  # fmt: skip

@@ -65,13 +65,17 @@ def run_suite(
     max_time_s: float = 600.0,
     env_kwargs: dict[str, Any] | None = None,
     policy_keys: tuple[str, ...] | None = None,
+    executor: Any = None,
 ) -> tuple[list[dict[str, Any]], dict[tuple[str, int], RunRecord]]:
     """Run every run of ``suite`` with ``policy``; return per-run results and recorded traces.
 
     ``vehicle`` is the suite's vehicle (a case may name its own). ``record``: ``"first_seed"``
     records speeds and pressures of each scenario's first seed, ``"all"`` every run, ``"none"``
-    nothing. ``policy_keys``: as ``run_runs``'.
+    nothing. ``policy_keys``: as ``run_runs``'. ``executor``: an object with ``run_runs``'s
+    signature that runs the runs elsewhere (``distributed.RayExecutor``: split across workers,
+    the same results); None runs them here.
     """
+    runner = run_runs if executor is None else executor.run_runs
     veh = vehicle if isinstance(vehicle, VehicleConfig) else load_vehicle(vehicle)
     runs = expand(suite, veh)
     groups: dict[int, list[int]] = {}  # runs of one vehicle share one batched core
@@ -88,7 +92,7 @@ def run_suite(
         bar = tqdm(total=len(runs), desc=f"{suite.name}: {policy.name}", unit="run", leave=False)
     for key, ids in groups.items():
         group = [runs[i] for i in ids]
-        res, rec = run_runs(
+        res, rec = runner(
             vehicles[key], group, policy, record, max_time_s, env_kwargs, bar, policy_keys
         )
         for i, r in zip(ids, res, strict=True):
