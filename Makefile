@@ -10,7 +10,7 @@ $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	# The local CPU build of torch first: a plain `torch` requirement would fetch a CUDA build.
 	$(BIN)/pip install --quiet torch==2.13.0
-	$(BIN)/pip install --quiet -e '.[rl,dev,export]'
+	$(BIN)/pip install --quiet -e '.[rl,dev,export,sweep]'
 	touch $(STAMP)
 
 demo: $(STAMP)

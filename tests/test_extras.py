@@ -1,8 +1,8 @@
 """An install without the optional extras (`rl`: torch and stable-baselines3; `export`: onnx and
-onnxruntime): the learned policies, `train` and `export-policy` say in one line which extra to
-install, never a ModuleNotFoundError traceback. The modules are hidden here by a ``None`` in
-``sys.modules`` (what makes ``import`` fail); tests/test_wheel.py checks the same in a fresh
-install without extras."""
+onnxruntime; `sweep`: ray and optuna): the learned policies, `train`, `export-policy`, `sweep`
+and `--workers` say in one line which extra to install, never a ModuleNotFoundError traceback.
+The modules are hidden here by a ``None`` in ``sys.modules`` (what makes ``import`` fail);
+tests/test_wheel.py checks the same in a fresh install without extras."""
 
 from __future__ import annotations
 
@@ -90,3 +90,19 @@ def test_export_without_its_extras_is_one_line(without, tmp_path, capsys, hidden
     assert f"{SHIPPED}: ONNX export needs the rl and export extras" in err
     assert f"pip install 'wsp-env[rl,export]' (no module named '{hidden}')" in err
     assert not onnx.exists()
+
+
+@pytest.mark.parametrize("hidden", ["ray", "optuna"])
+def test_sweep_and_workers_without_their_extra_are_one_line(without, tmp_path, capsys, hidden):
+    without(hidden)
+    out = tmp_path / "s"
+    assert main(["sweep", "--config", "x.yaml", "--out", str(out)]) == 2
+    err = _one_line(capsys)
+    assert "sweep needs the rl and sweep extras: pip install 'wsp-env[rl,sweep]'" in err
+    assert not out.exists()
+    if hidden == "ray":
+        j = tmp_path / "e.json"
+        assert main(["evaluate", "--policy", "none", "--workers", "2", "--json", str(j)]) == 2
+        err = _one_line(capsys)
+        assert "--workers/--address need the sweep extra: pip install 'wsp-env[sweep]'" in err
+        assert not j.exists()

@@ -211,6 +211,16 @@ def test_every_command_runs_from_a_fresh_install_without_extras(venvs):
     assert not (site.work / "run").exists()
     err = site.refused("export-policy", SHIPPED[0], "--onnx", "p.onnx")
     assert "pip install 'wsp-env[rl,export]'" in err, err
+    err = site.refused("bench", "--train", "--quick")
+    assert "bench --train needs the rl extra: pip install 'wsp-env[rl]'" in err, err
+    # without the sweep extra (Ray, Optuna): the same one line, the sweep files installed
+    err = site.refused("sweep", "--config", "x.yaml", "--out", "sw")
+    assert "sweep needs the rl and sweep extras: pip install 'wsp-env[rl,sweep]'" in err, err
+    err = site.refused("evaluate", "--suite", "quick", "--policy", "none", "--workers", "2")
+    assert "--workers/--address need the sweep extra" in err, err
+    assert sorted(p.name for p in (pkg / "configs" / "sweeps").glob("*.yaml")) == sorted(
+        p.name for p in (ROOT / "configs" / "sweeps").glob("*.yaml")
+    )
 
 
 @pytest.mark.wheel

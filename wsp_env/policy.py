@@ -241,7 +241,11 @@ META_NAME = "wsp_env.json"  # the metadata entry ``wsp-env train`` adds to every
 OBSERVATION_LAYOUT = 1
 
 # the optional dependency groups (pyproject.toml) and the modules that tell they are installed
-EXTRAS = {"rl": ("torch", "stable_baselines3"), "export": ("onnx", "onnxruntime")}
+EXTRAS = {
+    "rl": ("torch", "stable_baselines3"),
+    "export": ("onnx", "onnxruntime"),
+    "sweep": ("ray", "optuna"),
+}
 
 
 class MissingExtraError(ValueError):

@@ -33,9 +33,10 @@ So, when a learner shares the process (``role="train"``):
 Without a learner (``role="evaluate"``: suites, the benchmark, calibration) the kernel's
 parallel path runs from 64 environments on all cores, as before.
 
-Overrides (documented in ``docs/training.md``), read when a policy is made:
-``WSP_TORCH_THREADS=N`` pins the update threads (no probing), ``WSP_NUMBA_THREADS=N`` the
-kernel's threads and ``WSP_PARALLEL_MIN_ENVS=N`` where its parallel path starts (``0``: never).
+Overrides (documented in ``docs/training.md``), read when a policy is made: ``WSP_CORES=N``
+the cores to plan for (a sweep sets it to a trial's declared CPUs), ``WSP_TORCH_THREADS=N``
+pins the update threads (no probing), ``WSP_NUMBA_THREADS=N`` the kernel's threads and
+``WSP_PARALLEL_MIN_ENVS=N`` where its parallel path starts (``0``: never).
 Thread counts do not change results: torch's CPU kernels split work over outputs, not over
 sums (``tests/test_threads.py`` trains with 1 and with 2 update threads and compares
 parameters bit for bit), and the kernel gives the same numbers serial or parallel.
@@ -56,6 +57,7 @@ NEVER = 2**62  # a parallel threshold no environment count reaches
 ENV_TORCH = "WSP_TORCH_THREADS"
 ENV_NUMBA = "WSP_NUMBA_THREADS"
 ENV_PARALLEL = "WSP_PARALLEL_MIN_ENVS"
+ENV_CORES = "WSP_CORES"
 CANDIDATES = (1, 2, 4, 8)
 
 
@@ -64,8 +66,12 @@ class ThreadPolicyError(ValueError):
 
 
 def available_cores() -> int:
-    """Cores this process may run on (its CPU affinity, which containers and ``taskset`` set;
+    """Cores this process may run on: ``WSP_CORES`` where set (a sweep's trial: the CPUs it
+    declared to Ray), else its CPU affinity (which containers and ``taskset`` set;
     ``os.cpu_count()`` counts the machine's)."""
+    declared = _env_int(ENV_CORES, 1)
+    if declared is not None:
+        return declared
     try:
         return max(1, len(os.sched_getaffinity(0)))
     except AttributeError:  # not on Linux
@@ -227,6 +233,7 @@ class AdaptiveThreads:
 
 
 __all__ = [
+    "ENV_CORES",
     "ENV_NUMBA",
     "ENV_PARALLEL",
     "ENV_TORCH",

@@ -601,6 +601,49 @@ def cmd_bench(args: argparse.Namespace) -> dict[str, Any]:
 # ---- train ----------------------------------------------------------------------------------
 
 
+SWEEP_EPILOG = """\
+a cluster: start Ray's head on one machine and attach the others (same Python environment,
+the same project files where the trials read them):
+  head$    ray start --head --port 6379
+  worker$  ray start --address HEAD_HOST:6379
+  head$    wsp-env sweep --config configs/sweeps/NAME.yaml --out runs/sweeps/NAME --address auto
+Without --address Ray starts in this process on this machine's cores and stops at the end.
+A killed sweep goes on with: wsp-env sweep --out DIR --resume (finished trials are not rerun;
+unfinished ones resume from their last checkpoint). See docs/sweeps.md."""
+
+
+def _add_sweep(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "sweep",
+        help="many training runs as one job on Ray Tune: a grid (configs, options, seeds) or "
+        "an Optuna search with pruning; local or on a cluster",
+        description="Runs every trial of a sweep file (configs/sweeps/NAME.yaml: a base "
+        "training config and a grid or a search space) as a `wsp-env train` run in DIR/trials/, "
+        "in chunks, each reporting its fixed-seed learning curve; writes results.json, "
+        "results.md (a table, the grid over seeds with 95 % intervals) and best.yaml.",
+        epilog=SWEEP_EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("--config", default=None, help="the sweep file (configs/sweeps/NAME.yaml)")
+    p.add_argument("--out", required=True, help="the sweep folder (new or empty; or --resume)")
+    p.add_argument("--address", default=None,
+                   help="attach to a running Ray cluster (auto or HOST:PORT); default: Ray "
+                   "started here")  # fmt: skip
+    p.add_argument("--resume", action="store_true",
+                   help="continue the sweep in --out (its own sweep.yaml)")  # fmt: skip
+    p.add_argument("--json", dest="json_path", default=None, help="write the result here")
+    p.set_defaults(func=cmd_sweep)
+
+
+def cmd_sweep(args: argparse.Namespace) -> dict[str, Any]:
+    from wsp_env.policy import require_extras
+
+    require_extras("sweep needs", "rl", "sweep")
+    from wsp_env.sweep.run import run_sweep
+
+    return run_sweep(args.config, args.out, address=args.address, resume=args.resume)
+
+
 def _add_train(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "train",
@@ -832,6 +875,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_calibrate(sub)
     _add_bench(sub)
     _add_train(sub)
+    _add_sweep(sub)
     _add_validate(sub)
     _add_export(sub)
     _add_rig(sub)
@@ -842,7 +886,7 @@ def build_parser() -> argparse.ArgumentParser:
 # the commands that step the physics, and what a first run of one says while numba compiles
 # (measured: docs/physics.md, "First run")
 COMPILING = ("simulate", "evaluate", "benchmark", "train", "validate", "rig", "traction",
-             "bench")  # fmt: skip
+             "bench", "sweep")  # fmt: skip
 COMPILE_NOTICE = (
     "wsp-env: compiling the physics kernels (once per install and version; 10-20 s on 2 cores) ..."
 )

@@ -196,7 +196,22 @@ def print_benchmark(result: dict[str, Any]) -> None:
               f"{p['watchdog_interventions']:>8d}")  # fmt: skip
 
 
+def print_sweep(result: dict[str, Any]) -> None:
+    print(f"sweep {result['sweep']}: {len(result['trials'])} trials in "
+          f"{result['wall_time_s']:.0f} s (metric {result['metric']})")  # fmt: skip
+    for s in result["summary"]:
+        ci = s["metric_ci95"]
+        mean = "-" if s["metric_mean"] is None else f"{s['metric_mean']:.3f}"
+        interval = "" if ci is None else f" (95 % {ci[0]:.3f}-{ci[1]:.3f})"
+        print(f"  {s['overrides'] or '(base)'}: {mean}{interval} over seeds {s['seeds']}")
+    best = result.get("best")
+    if best is not None:
+        print(f"best: trial {best['trial']} {best['overrides']} seed {best['seed']}: "
+              f"{best['metric']:.3f}; config {result.get('best_config')}")  # fmt: skip
+
+
 PRINTERS = {
+    "sweep": print_sweep,
     "benchmark": print_benchmark,
     "simulate": print_simulate,
     "evaluate": print_evaluate,

@@ -30,15 +30,14 @@ from wsp_env.core.config import VehicleConfig
 from wsp_env.evaluation.runner import run_runs
 from wsp_env.evaluation.suites import Run
 
-INSTALL_HINT = "pip install 'wsp-env[sweep]' (Ray)"
-
 
 def require_ray() -> Any:
-    """``ray``, or one line saying how to install it."""
-    try:
-        import ray
-    except ImportError:
-        raise ValueError(f"--workers/--address need Ray: {INSTALL_HINT}") from None
+    """``ray``, or one line saying how to install it (``policy.MissingExtraError``)."""
+    from wsp_env.policy import require_extras
+
+    require_extras("--workers/--address need", "sweep")
+    import ray
+
     return ray
 
 
@@ -199,7 +198,6 @@ class RayExecutor:
 
 
 __all__ = [
-    "INSTALL_HINT",
     "PolicySpec",
     "RayExecutor",
     "chunks",

@@ -275,6 +275,8 @@ def parse_train_config(data: Any, source: str = "") -> TrainConfig:
 
 
 SCHEDULABLE = ("learning_rate", "clip_range", "clip_range_vf")
+# counts SB3 only trips over inside ``learn`` (n_epochs 0: an unbound local in PPO.train)
+POSITIVE_COUNTS = ("n_steps", "batch_size", "n_epochs", "buffer_size")
 
 
 def _check_hyperparameter(name: str, value: Any, default: Any) -> None:
@@ -292,6 +294,8 @@ def _check_hyperparameter(name: str, value: Any, default: Any) -> None:
         number = isinstance(value, int | float) and not isinstance(value, bool)
         if not number or not math.isfinite(float(value)):
             raise ConfigError(f"{name}: expected a number, got {value!r}")
+        if name in POSITIVE_COUNTS and (not isinstance(value, int) or value < 1):
+            raise ConfigError(f"{name}: expected a whole number >= 1, got {value!r}")
 
 
 def _is_net_arch(v: Any) -> bool:
