@@ -84,6 +84,15 @@ def _fixtures(d: Path) -> None:
     (d / "train_out").mkdir()
     (d / "train_out" / "x.txt").write_text("not a run")
     (d / "empty_run").mkdir()
+    base = "train: ppo_uic_z1\nn_timesteps: 1000\n"
+    (d / "sweep_nobase.yaml").write_text("train: nosuch\n")
+    (d / "sweep_epochs.yaml").write_text(base + "grid: {n_epochs: [0]}\n")
+    (d / "sweep_both.yaml").write_text(
+        base + "grid: {n_epochs: [3]}\nsearch: {space: {gamma: {type: uniform, low: 0.9, "
+        "high: 0.99}}, trials: 2}\n"
+    )
+    (d / "sweep_cpus.yaml").write_text(base + "resources: {cpus: 512}\n")
+    (d / "sweep_ok.yaml").write_text(base)
     _traces(d)
 
 
@@ -271,6 +280,24 @@ def cases() -> list[Case]:
     cli(b, "zero repeats", "--repeats", "--repeats", "0")
     cli(b, "a thousand repeats", "--repeats", "--repeats", "1000")
     cli(b, "repeats a word", "--repeats", "--repeats", "x")
+
+    w = "sweep"
+    cli(w, "neither config nor resume", "--config", "--out", "sw")
+    cli(w, "missing sweep file", "missing.yaml", "--config", "missing.yaml", "--out", "sw")
+    cli(w, "unknown base config", "train", "--config", "sweep_nobase.yaml", "--out", "sw")
+    cli(w, "grid value the trainer refuses", "grid (n_epochs=0)", "--config",
+        "sweep_epochs.yaml", "--out", "sw")  # fmt: skip
+    cli(w, "grid and search at once", "search", "--config", "sweep_both.yaml", "--out", "sw")
+    cli(w, "more CPUs per trial than the machine", "resources.cpus", "--config",
+        "sweep_cpus.yaml", "--out", "sw")  # fmt: skip
+    cli(w, "occupied output folder", "train_out", "--config", "sweep_ok.yaml", "--out",
+        "train_out")  # fmt: skip
+    cli(w, "resume with nothing to resume", "empty_run", "--out", "empty_run", "--resume")
+    cli(e, "workers 0", "--workers", "--policy", "none", "--workers", "0")
+    cli(e, "a Ray address nobody answers", "--address", "--policy", "none", "--address",
+        "127.0.0.1:1")  # fmt: skip
+    cli("bench", "rollouts 0 with --train", "--rollouts", "--train", "--rollouts", "0")
+    cli("bench", "--busy without --train", "--busy", "--busy", "1")
 
     t = "train"
     cli(t, "neither config nor resume", "--config")

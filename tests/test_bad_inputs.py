@@ -18,7 +18,7 @@ def test_every_bad_input_is_clean() -> None:
     assert len(outcomes) >= 100
     groups = {o.case.group for o in outcomes}
     assert groups >= {"simulate", "evaluate", "calibrate", "bench", "train", "validate", "rig",
-                      "traction", "export-policy", "environment"}  # fmt: skip
+                      "traction", "export-policy", "environment", "sweep"}  # fmt: skip
     unclean = [f"{o.case.group}: {o.case.what}: {o.verdict}: {o.detail}" for o in outcomes
                if o.verdict != "clean"]  # fmt: skip
     assert unclean == []

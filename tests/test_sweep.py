@@ -129,9 +129,11 @@ def test_a_killed_sweep_resumes_without_redoing_finished_trials(tmp_path):
         ({"search": {"space": {"gamma": {"type": "normal"}}, "trials": 2}},
          "search.space.gamma.type: 'normal' is not one of"),
         ({"colour": "red"}, "colour: unknown field"),
+        ({"resources": {"cpus": 64}}, "resources.cpus: 64 per trial, but this machine has 2"),
     ],
 )  # fmt: skip
-def test_bad_sweep_file_is_one_line_naming_the_field(tmp_path, capsys, sweep, message):
+def test_bad_sweep_file_is_one_line_naming_the_field(tmp_path, capsys, monkeypatch, sweep, message):
+    monkeypatch.setenv("WSP_CORES", "2")
     cfg = _files(tmp_path, sweep)
     out = tmp_path / "out"
     assert main(["sweep", "--config", str(cfg), "--out", str(out)]) == 2

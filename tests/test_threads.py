@@ -135,3 +135,15 @@ def test_bench_train_quick_measures_both_learners(tmp_path, capsys):
     assert "ratio WSP / CartPole" in capsys.readouterr().out
     assert main(["bench", "--busy", "1"]) == 2
     assert "--busy: only with --train" in capsys.readouterr().err
+
+
+def test_applied_restores_the_process_state():
+    """A training run in a longer-lived process leaves its threads as it found them."""
+    import torch
+
+    before_torch, before = torch.get_num_threads(), threads.active_policy()
+    with threads.applied(thread_policy("train", cores=2)) as p:
+        assert threads.active_policy() is p and torch.get_num_threads() == 1
+        assert threads.parallel_min_envs() == NEVER
+    assert torch.get_num_threads() == before_torch
+    assert threads.active_policy() == before

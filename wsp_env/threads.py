@@ -46,8 +46,10 @@ The bottom layer: imports nothing from ``wsp_env``; numba and torch only inside 
 
 from __future__ import annotations
 
+import contextlib
 import os
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -173,6 +175,28 @@ def apply(policy: ThreadPolicy) -> ThreadPolicy:
     return policy
 
 
+@contextlib.contextmanager
+def applied(policy: ThreadPolicy) -> Iterator[ThreadPolicy]:
+    """``apply(policy)`` for a ``with`` block; then the process's previous policy and torch
+    thread count come back (a training run inside a longer-lived process, a test)."""
+    saved = list(_ACTIVE)
+    torch_before = _torch_threads()
+    try:
+        yield apply(policy)
+    finally:
+        _ACTIVE[:] = saved
+        if torch_before is not None:
+            set_torch_threads(torch_before)
+
+
+def _torch_threads() -> int | None:
+    try:
+        import torch
+    except ImportError:
+        return None
+    return int(torch.get_num_threads())
+
+
 def set_torch_threads(n: int) -> None:
     """``torch.set_num_threads(n)`` if torch is importable (training, policies); else nothing."""
     try:
@@ -241,6 +265,7 @@ __all__ = [
     "ThreadPolicy",
     "ThreadPolicyError",
     "active_policy",
+    "applied",
     "apply",
     "available_cores",
     "parallel_min_envs",

@@ -188,7 +188,8 @@ def collect(sweep: SweepConfig, sweep_dir: Path, grid: Any = None) -> dict[str, 
         else:
             overrides, seed = dict(cfg["search"]), cfg["seed"]
         metrics = res.metrics or {}
-        trial_id = metrics.get("trial_id")  # Tune adds it to every report
+        # Tune adds the id to every report; a trial that failed before its first has none
+        trial_id = metrics.get("trial_id") or (Path(res.path).name if res.path else "?")
         folder = sweep_dir / TRIALS / str(trial_id)
         done = folder / "train.json"
         finished = done.exists() and json.loads(done.read_text()).get("finished", False)
@@ -273,7 +274,15 @@ def run_sweep(
 
     started = time.perf_counter()
     os.environ.setdefault("RAY_AIR_NEW_OUTPUT", "0")  # Tune's quiet reporter: verbose=0 holds
-    with ray_session(address, None if address else available_cores()):
+    with ray_session(address, None if address else available_cores()) as ray:
+        have = ray.cluster_resources()
+        for key, want, name in (("CPU", sweep.cpus, "cpus"), ("GPU", sweep.gpus, "gpus")):
+            if want > float(have.get(key, 0.0)):
+                where = f"the cluster at {address}" if address else "this machine"
+                raise ConfigError(
+                    f"{sweep.source}: resources.{name}: {want:g} per trial, but {where} has "
+                    f"{float(have.get(key, 0.0)):g} (no trial could start)"
+                )
         if not resume:
             sweep_dir.mkdir(parents=True, exist_ok=True)
             (sweep_dir / TRIALS).mkdir(exist_ok=True)

@@ -27,8 +27,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from wsp_env.threads import AdaptiveThreads, thread_policy
-from wsp_env.threads import apply as apply_threads
+from wsp_env.threads import AdaptiveThreads, ThreadPolicy, applied, thread_policy
 from wsp_env.training.config import (
     algo_class,
     algo_hyperparams,
@@ -69,8 +68,15 @@ def run_train_bench(
     busy: int = 0,
     quick: bool = False,
 ) -> dict[str, Any]:
-    """The figures of ``wsp-env bench --train`` (module docstring). ``quick``: 2 envs' worth of
+    """The figures of ``wsp-env bench --train`` (module docstring). ``quick``: 4 environments'
     tiny rollouts, for tests."""
+    with applied(thread_policy("train")) as policy:
+        return _measure(config, rollouts, repeats, busy, quick, policy)
+
+
+def _measure(
+    config: str, rollouts: int, repeats: int, busy: int, quick: bool, policy: ThreadPolicy
+) -> dict[str, Any]:
     import torch
     from stable_baselines3.common.env_util import make_vec_env
 
@@ -83,7 +89,6 @@ def run_train_bench(
 
         cfg = dataclasses.replace(cfg, n_envs=4)
         hyper.update(n_steps=32, batch_size=64, n_epochs=1)
-    policy = apply_threads(thread_policy("train"))
     cls = algo_class(cfg.algo)
     kwargs = algo_policy_kwargs(cfg) or None
     steps = rollouts * cfg.n_envs * int(hyper.get("n_steps", 2048))

@@ -54,8 +54,8 @@ import numpy as np
 import yaml
 
 from wsp_env.core.config import ConfigError, load_vehicle, read_yaml
-from wsp_env.threads import AdaptiveThreads, thread_policy
-from wsp_env.threads import apply as apply_threads
+from wsp_env.threads import AdaptiveThreads, ThreadPolicy, thread_policy
+from wsp_env.threads import applied as applied_threads
 from wsp_env.training.config import (
     JUDGING_SUITES,
     OFF_POLICY,
@@ -483,6 +483,23 @@ def train(
     after about this many steps (at the next rollout boundary) with a checkpoint, to go on
     with ``resume``: chunks resumed in turn give the run trained in one go, bit for bit.
     """
+    # the thread policy for a learner in this process, for the run only (wsp_env.threads);
+    # before the environments are built: the kernel's serial or parallel path is chosen then
+    with applied_threads(thread_policy("train")) as policy_threads:
+        return _train(config, out, seed, resume, total_timesteps, progress, chunk_timesteps,
+                      policy_threads)  # fmt: skip
+
+
+def _train(
+    config: str | Path | TrainConfig | None,
+    out: str | Path,
+    seed: int | None,
+    resume: str | Path | None,
+    total_timesteps: int | None,
+    progress: bool,
+    chunk_timesteps: int | None,
+    policy_threads: ThreadPolicy,
+) -> dict[str, Any]:
     from wsp_env.policy import require_extras
 
     require_extras("training needs", "rl")  # one line, before the config (its checks use SB3)
@@ -510,8 +527,6 @@ def train(
         if out.exists() and any(out.iterdir()):
             raise ConfigError(f"{out}: exists and is not empty (use --resume {out} to continue)")
     cls = algo_class(cfg.algo)
-    # before the environments are built: the kernel's serial or parallel path is chosen then
-    policy_threads = apply_threads(thread_policy("train"))
     venv = _make_venv(cfg)
     started = time.perf_counter()
     if resume is not None:
