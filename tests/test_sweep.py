@@ -149,3 +149,36 @@ def test_shipped_sweep_files_load():
     assert files
     for f in files:
         load_sweep_config(f)
+
+
+def test_attaches_to_a_running_cluster_with_the_same_file(tmp_path, monkeypatch):
+    """``--address``: a Ray head started apart (``ray start --head``, as on a cluster) runs a
+    sweep and a split evaluation; the evaluation equals the one-process one."""
+    import socket
+    from pathlib import Path
+
+    with socket.socket() as s:  # a free port
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    ray = str(Path(sys.executable).with_name("ray"))
+    env = {**os.environ, "RAY_AUTH_MODE": "disabled"}
+    start = [ray, "start", "--head", f"--port={port}", "--num-cpus=2",
+             "--include-dashboard=false"]  # fmt: skip
+    subprocess.run(start, env=env, check=True, capture_output=True, timeout=120)
+    try:
+        monkeypatch.setenv("RAY_AUTH_MODE", "disabled")
+        cfg = _files(tmp_path, {"seeds": [0], "report_every_timesteps": 256})
+        address = f"127.0.0.1:{port}"
+        assert main(["sweep", "--config", str(cfg), "--out", str(tmp_path / "out"),
+                     "--address", address]) == 0  # fmt: skip
+        r = json.loads((tmp_path / "out" / "results.json").read_text())
+        assert r["address"] == address and r["trials"][0]["status"] == "finished"
+        argv = ["benchmark", "--policy", "classical", "--tier", "wheels", "--runs", "4",
+                "--no-progress"]  # fmt: skip
+        assert main([*argv, "--address", address, "--json", str(tmp_path / "a.json")]) == 0
+        assert main([*argv, "--json", str(tmp_path / "b.json")]) == 0
+        assert json.loads((tmp_path / "a.json").read_text()) == json.loads(
+            (tmp_path / "b.json").read_text()
+        )
+    finally:
+        subprocess.run([ray, "stop", "--force"], env=env, capture_output=True, timeout=120)
