@@ -218,6 +218,22 @@ def test_resume_in_chunks_is_bit_for_bit(tmp_path, kind):
     assert steps == sorted(set(steps)) and (kind == "sac" or steps[-1] > int(half))
 
 
+def test_a_run_with_action_repeat_trains_and_evaluates_with_its_repeat(tmp_path, capsys):
+    """The environment holds each action 3 periods in training; the model file remembers it
+    and its evaluation on the 20 ms core holds its actions as long."""
+    cfg = train_config(
+        tmp_path, n_timesteps=256, gamma=0.997,
+        env_kwargs={"vehicle": "uic_z1", "scenario": {"speed_kmh": [30, 40]}, "action_repeat": 3},
+    )  # fmt: skip
+    out = tmp_path / "run"
+    assert main(["train", "--config", str(cfg), "--out", str(out), "--no-progress"]) == 0
+    assert model_metadata(out / "model.zip")["env_kwargs"]["action_repeat"] == 3
+    policy = make_policy(str(out / "model.zip"))
+    assert policy.action_repeat == 3
+    res = json.loads((out / "curve.json").read_text())["history"]
+    assert res and res[-1]["timesteps"] == 256
+
+
 def test_another_seed_is_another_run(ppo_run, tmp_path):
     _, tmp, out = ppo_run
     cfg = tmp / "ppo_1.yaml" if (tmp / "ppo_1.yaml").exists() else next(tmp.glob("ppo_*.yaml"))
@@ -264,6 +280,12 @@ def test_discrete_models_are_evaluated_in_discrete_mode(tmp_path):
         ({"gamma": "0.99"}, "gamma"),
         ({"batch_size": True}, "batch_size"),
         ({"n_epochs": "lin_3"}, "n_epochs"),
+        ({"n_epochs": 0}, "n_epochs: expected a whole number >= 1"),
+        ({"env_kwargs": {"action_repeat": 0}}, "env_kwargs.action_repeat: must be an integer"),
+        (
+            {"env_kwargs": {"action_repeat": 3, "reward": {"shaping_decel_mps2": 1.0}}},
+            "env_kwargs.reward.shaping_decel_mps2: the shaping is written per control period",
+        ),
         (
             {"env_kwargs": {"reward": {"shaping_decel_mps2": 1.0, "shaping_gamma": 0.99}}},
             "env_kwargs.reward.shaping_gamma",

@@ -127,12 +127,17 @@ class SB3Policy:
         self._epsilon = float(getattr(norm, "epsilon", 1e-8))
         self._norm_obs = bool(getattr(norm, "norm_obs", True))
         self.env_kwargs = {k: env_kwargs[k] for k in POLICY_ENV_KWARGS if k in env_kwargs}
+        # the environment held each action this many control periods: the policy holds it
+        # itself on the 20 ms core (evaluation, the benchmark), which knows no repeat
+        self.action_repeat = int(self.env_kwargs.pop("action_repeat", 1))
         self.privileged = bool(self.env_kwargs.get("privileged", False))
         self.n_stack = n_stack
         self.recurrent = hasattr(model.policy, "lstm_actor")
         self._stack: np.ndarray | None = None
         self._state: Any = None
         self._episode_start: np.ndarray | None = None
+        self._phase: np.ndarray | None = None
+        self._held: np.ndarray | None = None
 
     def bind(self, core: Any) -> None:
         if self.vehicle is not None and self.vehicle != core.vehicle.id:
@@ -159,13 +164,19 @@ class SB3Policy:
         self._stack = np.zeros((core.n_envs, width * self.n_stack), dtype=np.float32)
         self._state = None
         self._episode_start = np.ones(core.n_envs, dtype=bool)
+        self._phase = np.zeros(core.n_envs, dtype=np.int64)  # periods since the last decision
+        self._held = np.zeros((core.n_envs, core.n_valves),
+                              dtype=np.float64 if self._discrete else np.float32)  # fmt: skip
 
     def reset(self, env_ids: np.ndarray) -> None:
-        """New episodes: their frame stacks emptied, their recurrent state restarted."""
+        """New episodes: their frame stacks emptied, their recurrent state restarted, their
+        next period a decision."""
         if self._stack is not None:
             self._stack[env_ids] = 0.0
         if self._episode_start is not None:
             self._episode_start[env_ids] = True
+        if self._phase is not None:
+            self._phase[env_ids] = 0
 
     def normalisation(self) -> tuple[np.ndarray, np.ndarray, float] | None:
         """The observation normalisation ``clip((obs - mean) / scale, -clip, clip)`` as
@@ -183,14 +194,32 @@ class SB3Policy:
         return np.clip((obs - mean) / scale, -clip, clip).astype(np.float32)
 
     def act(self, obs: np.ndarray) -> np.ndarray:
+        """Actions for ``obs``; a model trained with ``action_repeat`` k decides on every k-th
+        period of each stop (its first included) and holds that action in between, as the
+        environment it learned in held it (its frame stack and memory advance per decision)."""
+        if self.action_repeat == 1:
+            return self._decide(obs, None)
+        assert self._phase is not None, "bind first"
+        due = self._phase == 0
+        if due.any():
+            self._held[due] = self._decide(obs, due)[due]
+        self._phase = (self._phase + 1) % self.action_repeat
+        return self._held.copy()
+
+    def _decide(self, obs: np.ndarray, rows: np.ndarray | None) -> np.ndarray:
+        """The model's actions for every row; the frame stack and the recurrent state advance
+        for ``rows`` only (a mask; None: all)."""
         if self._drop is not None:
             obs = np.delete(obs, self._drop, axis=1)
         x = self.normalise(obs)
         if self.n_stack > 1:
             assert self._stack is not None, "bind first"
             width = x.shape[1]
-            self._stack[:, :-width] = self._stack[:, width:]
-            self._stack[:, -width:] = x
+            stack = self._stack if rows is None else self._stack[rows]
+            stack[:, :-width] = stack[:, width:]
+            stack[:, -width:] = x if rows is None else x[rows]
+            if rows is not None:
+                self._stack[rows] = stack
             x = self._stack.copy()
         n = x.shape[0]
         pad = (-n) % INFERENCE_BLOCK
@@ -214,10 +243,16 @@ class SB3Policy:
                 actions.append(a)
                 states.append(st)
             action = np.concatenate(actions)[:n]
-            self._state = tuple(
-                np.concatenate(hs, axis=1)[:, :n] for hs in zip(*states, strict=True)
-            )
-            self._episode_start[:] = False
+            new_state = tuple(np.concatenate(hs, axis=1)[:, :n] for hs in zip(*states, strict=True))
+            if rows is None or self._state is None:
+                self._state = new_state
+            else:  # only the environments that decided move on
+                for h_old, h_new in zip(self._state, new_state, strict=True):
+                    h_old[:, rows] = h_new[:, rows]
+            if rows is None:
+                self._episode_start[:] = False
+            else:
+                self._episode_start[rows] = False
         else:
             action = np.concatenate(
                 [
@@ -231,7 +266,7 @@ class SB3Policy:
 # the environment settings a trained model needs in evaluation (its spaces and timing)
 POLICY_ENV_KWARGS = (
     "action_mode", "residual_scale", "residual_deadband", "valve_group", "privileged",
-    "accelerometer", "accelerometer_bias_mps2", "control_period_s",
+    "accelerometer", "accelerometer_bias_mps2", "control_period_s", "action_repeat",
 )  # fmt: skip
 
 

@@ -3,8 +3,14 @@
 core as the environments build it (what evaluation, training and the rig build too)."""
 
 from wsp_env.core.braking import RewardConfig, ScenarioConfig
-from wsp_env.envs.wsp_braking import WSPBrakingEnv, WSPBrakingVectorEnv, make_core
+from wsp_env.envs.wsp_braking import (
+    WSPBrakingEnv,
+    WSPBrakingVectorEnv,
+    check_action_repeat,
+    make_core,
+)
 
 __all__ = [
-    "RewardConfig", "ScenarioConfig", "WSPBrakingEnv", "WSPBrakingVectorEnv", "make_core",
+    "RewardConfig", "ScenarioConfig", "WSPBrakingEnv", "WSPBrakingVectorEnv",
+    "check_action_repeat", "make_core",
 ]  # fmt: skip

@@ -132,6 +132,20 @@ cannot see (gymnasium does not pass ``N`` on): its truncating step's ``info`` ha
 itself at step ``N``, with them), or read ``env.unwrapped.core.episode_info(0)``. The vector
 class takes ``max_episode_steps=N`` itself (``gymnasium.make_vec`` passes it on).
 
+## Action repeat
+
+``action_repeat=k`` (1-50) makes one step ``k`` control periods: the action is held for ``k``
+periods while sensors, the shared estimator, the watchdog and the valves go on at
+``control_period_s``; the reward is the sum of the ``k`` periods' rewards (and
+``info["reward_terms"]`` their sums); the observation is the last period's. A decision every
+60-100 ms (``k`` = 3-5) matches the pneumatics' time scale, where a 20 ms decision is mostly
+filtered out. A stop that ends within a step ends there: the step returns its last
+observation and ``metrics`` (the vector class autoresets after the step). The step limit is
+``ceil(ceil(max_time_s / control_period_s) / k)``; a learner's discount per step should be
+``gamma ** k`` of the per-period one. A trained model remembers its ``action_repeat`` (its
+config) and, evaluated on the 20 ms core, decides every ``k`` periods and holds its action in
+between (``policy.SB3Policy``), so the benchmark scores it with the same sensors and watchdog.
+
 ## Arguments
 
 ``gymnasium.make("WSPBraking-v0", **kwargs)``, ``gymnasium.make_vec("WSPBraking-v0",
@@ -154,7 +168,8 @@ num_envs=N, **kwargs)``:
 | ``scenario`` | ScenarioConfig or dict | defaults | what ``reset`` draws from (Starting State) |
 | ``rails_config`` | str or None | None | a rails YAML instead of ``configs/rails.yaml`` |
 | ``extra_rails`` | dict or None | None | further ``RailConfig`` objects by name |
-| ``control_period_s`` | float | ``0.02`` | the BCU cycle: one step |
+| ``control_period_s`` | float | ``0.02`` | the BCU cycle: sensors, estimator, watchdog and valves run at it |
+| ``action_repeat`` | int | ``1`` | control periods per step (Action repeat): a decision every ``action_repeat * control_period_s`` |
 | ``substep_s`` | float | ``0.001`` | the physics substep (linearly implicit; docs/physics.md) |
 | ``max_time_s`` | float | ``300.0`` | truncation after ``ceil(max_time_s / control_period_s)`` steps (Episode End) |
 | ``render_mode`` | str or None | None | ``"rgb_array"``: ``render()`` returns a frame, ``(480, 640, 3)`` uint8, of the last 10 s (wheel speeds against the train and the reference, slips, cylinder pressures against the demand; one figure reused, > 50 frames/s); ``"human"``: the same in a matplotlib window, updated at every step (with a non-interactive backend, e.g. ``MPLBACKEND=Agg`` or no display, drawn but not shown); ``wsp_env.envs.rendering`` |
@@ -178,7 +193,8 @@ num_envs=N, **kwargs)``:
   truncation is counted, after exactly ``ceil(max_time_s / control_period_s)`` steps (it came
   one step later where the simulated time's float sum fell short of ``max_time_s``: 15,001
   steps at 300 s); the made environment's ``spec.max_episode_steps`` is that limit; the
-  ``human`` render mode, and frames of the last 10 s on one reused figure.
+  ``human`` render mode, and frames of the last 10 s on one reused figure; ``action_repeat``
+  (default 1: unchanged).
 """
 
 from __future__ import annotations
@@ -220,6 +236,22 @@ def episode_step_limit(max_time_s: float, control_period_s: float) -> int:
     return math.ceil(round(max_time_s / control_period_s, 9))
 
 
+ACTION_REPEAT_MAX = 50
+
+
+def check_action_repeat(action_repeat: Any) -> int:
+    """``action_repeat`` as an int in 1-``ACTION_REPEAT_MAX``, or a one-line ``ValueError``."""
+    if (
+        isinstance(action_repeat, bool)
+        or not isinstance(action_repeat, int | np.integer)
+        or not 1 <= action_repeat <= ACTION_REPEAT_MAX
+    ):
+        raise ValueError(
+            f"action_repeat: must be an integer 1-{ACTION_REPEAT_MAX}, got {action_repeat!r}"
+        )
+    return int(action_repeat)
+
+
 def _spec_with_limit(spec: EnvSpec | None, max_episode_steps: int) -> EnvSpec | None:
     """``spec`` (what ``gymnasium.make`` / ``make_vec`` set) with the environment's own step
     limit where it has none (no ``TimeLimit`` is involved: the environment truncates itself)."""
@@ -254,9 +286,11 @@ class WSPBrakingEnv(gym.Env):
         control_period_s: float = 0.02,
         substep_s: float = 1e-3,
         max_time_s: float = 300.0,
+        action_repeat: int = 1,
     ) -> None:
         if render_mode not in (None, *self.metadata["render_modes"]):
             raise ValueError(f"render_mode: {render_mode!r} (supported: human, rgb_array)")
+        self.action_repeat = check_action_repeat(action_repeat)
         self.render_mode = render_mode
         self.core = make_core(
             1, vehicle=vehicle, action_mode=action_mode, residual_scale=residual_scale,
@@ -267,8 +301,11 @@ class WSPBrakingEnv(gym.Env):
         )  # fmt: skip
         self.action_space = self.core.action_space()
         self.observation_space = self.core.observation_space()
-        self.max_episode_steps = episode_step_limit(max_time_s, control_period_s)
+        # the stop's limit in control periods, and in steps of action_repeat periods
+        self.period_limit = episode_step_limit(max_time_s, control_period_s)
+        self.max_episode_steps = math.ceil(self.period_limit / self.action_repeat)
         self.elapsed_steps = 0
+        self.elapsed_periods = 0
         # rendering: the recent history a frame shows (kept only with a render_mode: nothing
         # otherwise) and the figure it is drawn on (``wsp_env.envs.rendering``)
         self.render_history: RenderHistory | None = None
@@ -297,6 +334,7 @@ class WSPBrakingEnv(gym.Env):
         self.core.rngs[0] = self.np_random
         info = self.core.reset_env(0, options)
         self.elapsed_steps = 0
+        self.elapsed_periods = 0
         if self.render_history is not None:
             self.render_history.clear(0)
             self.render_history.record()
@@ -307,26 +345,35 @@ class WSPBrakingEnv(gym.Env):
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         core = self.core
         a = core.check_actions(np.reshape(action, (1, -1)) if np.ndim(action) == 1 else action)
-        core.step(a)
-        terms = core.terms[0]
-        reward = float(terms.sum())
-        core.episode_return[0] += reward
-        core.episode_terms[0] += terms
+        terms = None
+        clipped = 0
+        terminated = truncated = False
+        for _ in range(self.action_repeat):  # the action held for action_repeat periods
+            core.step(a)
+            period = core.terms[0]
+            terms = period.copy() if terms is None else terms + period
+            core.episode_return[0] += float(period.sum())
+            core.episode_terms[0] += period
+            clipped += int(core.flags[0, K.F_CLIPPED])
+            self.elapsed_periods += 1
+            terminated = bool(core.flags[0, K.F_TERMINATED])
+            truncated = not terminated and (
+                self.elapsed_periods >= self.period_limit or bool(core.flags[0, K.F_TRUNCATED])
+            )
+            if self.render_history is not None:
+                self.render_history.record()
+            if terminated or truncated:
+                break
         self.elapsed_steps += 1
-        terminated = bool(core.flags[0, K.F_TERMINATED])
-        truncated = not terminated and (
-            self.elapsed_steps >= self.max_episode_steps or bool(core.flags[0, K.F_TRUNCATED])
-        )
+        reward = float(terms.sum())
         info: dict[str, Any] = {
             "reward_terms": dict(zip(TERM_NAMES, terms.tolist(), strict=True)),
-            "action_clipped": int(core.flags[0, K.F_CLIPPED]),
+            "action_clipped": clipped,
         }
         if terminated or truncated:
             info["metrics"] = core.episode_info(0)
-        if self.render_history is not None:
-            self.render_history.record()
-            if self.render_mode == "human":
-                self.renderer.draw(0)
+        if self.render_mode == "human":
+            self.renderer.draw(0)
         return core.obs[0].copy(), reward, terminated, truncated, info
 
     def render(self) -> np.ndarray | None:
@@ -383,9 +430,11 @@ class WSPBrakingVectorEnv(VectorEnv):
         control_period_s: float = 0.02,
         substep_s: float = 1e-3,
         max_time_s: float | None = None,
+        action_repeat: int = 1,
     ) -> None:
         if render_mode not in (None, *self.metadata["render_modes"]):
             raise ValueError(f"render_mode: {render_mode!r} (supported: rgb_array)")
+        self.action_repeat = check_action_repeat(action_repeat)
         if max_episode_steps is not None and (
             isinstance(max_episode_steps, bool)
             or not isinstance(max_episode_steps, int | np.integer)
@@ -396,7 +445,7 @@ class WSPBrakingVectorEnv(VectorEnv):
             )
         if max_time_s is None:
             steps = max_episode_steps
-            max_time_s = 300.0 if steps is None else steps * control_period_s
+            max_time_s = 300.0 if steps is None else steps * self.action_repeat * control_period_s
         self.core = make_core(
             num_envs, vehicle=vehicle, action_mode=action_mode, residual_scale=residual_scale,
             residual_deadband=residual_deadband, valve_group=valve_group, privileged=privileged,
@@ -410,11 +459,15 @@ class WSPBrakingVectorEnv(VectorEnv):
         self.single_observation_space = self.core.observation_space()
         self.action_space = batch_space(self.single_action_space, num_envs)
         self.observation_space = batch_space(self.single_observation_space, num_envs)
-        limit = episode_step_limit(max_time_s, control_period_s)
+        # the stop's limit in control periods and in steps (of action_repeat periods)
+        self.period_limit = episode_step_limit(max_time_s, control_period_s)
+        limit = math.ceil(self.period_limit / self.action_repeat)
         if max_episode_steps is not None:
             limit = min(limit, int(max_episode_steps))
+            self.period_limit = min(self.period_limit, limit * self.action_repeat)
         self.max_episode_steps = limit
         self.episode_steps = np.zeros(num_envs, dtype=np.int64)  # steps of each env's stop
+        self.episode_periods = np.zeros(num_envs, dtype=np.int64)  # its control periods
         self.render_history: RenderHistory | None = None
         self.renderer: FrameRenderer | None = None
         if render_mode is not None:
@@ -457,6 +510,7 @@ class WSPBrakingVectorEnv(VectorEnv):
             self.core.rngs[i] = seeding.np_random(s)[0]
         scenarios = [self.core.reset_env(i, each[i])["scenario"] for i in range(self.num_envs)]
         self.episode_steps[:] = 0
+        self.episode_periods[:] = 0
         if self.render_history is not None:
             self.render_history.clear(slice(None))
             self.render_history.record()
@@ -467,30 +521,39 @@ class WSPBrakingVectorEnv(VectorEnv):
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         core = self.core
         a = core.check_actions(actions)
-        core.step(a)
-        rewards = core.terms.sum(axis=1)
-        core.episode_return += rewards
-        core.episode_terms += core.terms
+        if self.action_repeat == 1:
+            core.step(a)
+            terms = core.terms.copy()
+            core.episode_return += terms.sum(axis=1)
+            core.episode_terms += core.terms
+            self.episode_periods += 1
+            terminated = core.flags[:, K.F_TERMINATED].astype(bool)
+            truncated = core.flags[:, K.F_TRUNCATED].astype(bool)
+            truncated |= self.episode_periods >= self.period_limit
+            truncated &= ~terminated
+            clipped = core.flags[:, K.F_CLIPPED].copy()
+            final_obs = final_info = None
+        else:
+            terms, terminated, truncated, clipped, final_obs, final_info = self._repeat(a)
+        rewards = terms.sum(axis=1)
         self.episode_steps += 1
-        terminated = core.flags[:, K.F_TERMINATED].astype(bool)
-        truncated = core.flags[:, K.F_TRUNCATED].astype(bool)
-        truncated |= self.episode_steps >= self.max_episode_steps
-        truncated &= ~terminated
         info: dict[str, Any] = {
-            "reward_terms": {n: core.terms[:, i].copy() for i, n in enumerate(TERM_NAMES)},
-            "action_clipped": core.flags[:, K.F_CLIPPED].copy(),
+            "reward_terms": {n: terms[:, i].copy() for i, n in enumerate(TERM_NAMES)},
+            "action_clipped": clipped,
         }
         ended = np.flatnonzero(terminated | truncated)
         if ended.size:
-            final_obs = np.zeros((self.num_envs, core.obs_dim), dtype=np.float32)
-            final_info = np.full(self.num_envs, None, dtype=object)
+            if final_obs is None:
+                final_obs = np.zeros((self.num_envs, core.obs_dim), dtype=np.float32)
+                final_info = np.full(self.num_envs, None, dtype=object)
+                for e in ended:  # only the environments that just ended
+                    final_obs[e], final_info[e] = self._final(int(e))
             mask = np.zeros(self.num_envs, dtype=bool)
             mask[ended] = True
-            for e in ended:  # only the environments that just ended
-                final_obs[e] = core.final_obs(int(e))
-                final_info[e] = {"metrics": core.episode_info(e), "scenario": core.describe(e)}
+            for e in ended:
                 core.reset_env(int(e), None)
             self.episode_steps[ended] = 0
+            self.episode_periods[ended] = 0
             info.update(
                 final_obs=final_obs, _final_obs=mask, final_info=final_info, _final_info=mask.copy()
             )
@@ -499,6 +562,49 @@ class WSPBrakingVectorEnv(VectorEnv):
         if self.render_history is not None:
             self.render_history.record()
         return core.obs.copy(), rewards, terminated, truncated, info
+
+    def _final(self, e: int) -> tuple[np.ndarray, dict[str, Any]]:
+        core = self.core
+        return core.final_obs(e), {"metrics": core.episode_info(e), "scenario": core.describe(e)}
+
+    def _repeat(self, a: np.ndarray) -> tuple[np.ndarray, ...]:
+        """``action_repeat`` control periods with the action held; a stop that ends within
+        them is recorded where it ended and held there (``freeze``) for the rest of the step."""
+        core, n = self.core, self.num_envs
+        terms = np.zeros((n, K.N_TERMS))
+        done = np.zeros(n, dtype=bool)
+        terminated = np.zeros(n, dtype=bool)
+        truncated = np.zeros(n, dtype=bool)
+        clipped = np.zeros(n, dtype=core.flags.dtype)
+        final_obs = np.zeros((n, core.obs_dim), dtype=np.float32)
+        final_info = np.full(n, None, dtype=object)
+        for _ in range(self.action_repeat):
+            core.step(a)
+            live = ~done
+            period = np.where(live[:, None], core.terms, 0.0)
+            terms += period
+            core.episode_return += period.sum(axis=1)
+            core.episode_terms += period
+            clipped += np.where(live, core.flags[:, K.F_CLIPPED], 0)
+            self.episode_periods += live
+            term = live & core.flags[:, K.F_TERMINATED].astype(bool)
+            trunc = (
+                live
+                & ~term
+                & (
+                    core.flags[:, K.F_TRUNCATED].astype(bool)
+                    | (self.episode_periods >= self.period_limit)
+                )
+            )
+            for e in np.flatnonzero(term | trunc):
+                final_obs[e], final_info[e] = self._final(int(e))
+                core.freeze(int(e))  # held where it ended until the step's end
+            terminated |= term
+            truncated |= trunc
+            done |= term | trunc
+            if done.all():
+                break
+        return terms, terminated, truncated, clipped, final_obs, final_info
 
     def render(self) -> tuple[np.ndarray, ...] | None:
         """``rgb_array``: every environment's frame (``WSPBrakingEnv.render``); else None."""

@@ -30,7 +30,7 @@ ENV_KWARGS = (
     "vehicle", "action_mode", "residual_scale", "residual_deadband", "valve_group", "privileged",
     "accelerometer", "accelerometer_bias_mps2", "sensors", "estimator", "watchdog", "reward",
     "scenario", "rails_config",
-    "control_period_s", "substep_s", "max_time_s",
+    "control_period_s", "substep_s", "max_time_s", "action_repeat",
 )  # fmt: skip
 SCHEDULE = re.compile(r"^lin_([0-9.eE+-]+)$")
 JUDGING_SUITES = ("heldout", "en15595")  # never used for model selection
@@ -239,6 +239,9 @@ def parse_train_config(data: Any, source: str = "") -> TrainConfig:
             raise ConfigError(
                 f"pretrain: a warm start of the actor-critic of ppo or a2c, not {algo}"
             )
+        if env_kwargs.get("action_repeat", 1) != 1:
+            raise ConfigError("pretrain: the teacher acts every control period; drop "
+                              "env_kwargs.action_repeat or the warm start")  # fmt: skip
         if env_kwargs.get("action_mode", "continuous") != "continuous":
             raise ConfigError("pretrain: needs env_kwargs.action_mode continuous (the teacher's "
                               "actions are valve fractions)")  # fmt: skip
@@ -263,6 +266,12 @@ def parse_train_config(data: Any, source: str = "") -> TrainConfig:
     check_env_kwargs(cfg.env_kwargs)
     reward = cfg.env_kwargs.get("reward") or {}
     if isinstance(reward, dict) and float(reward.get("shaping_decel_mps2", 0.0) or 0.0) > 0.0:
+        if cfg.env_kwargs.get("action_repeat", 1) != 1:
+            raise ConfigError(
+                "env_kwargs.reward.shaping_decel_mps2: the shaping is written per control "
+                "period; with action_repeat its sum over a step no longer leaves the best "
+                "policy unchanged (drop one of them)"
+            )
         gamma = float(hyper.get("gamma", params["gamma"].default))
         shaping_gamma = float(reward.get("shaping_gamma", 0.999))
         if abs(gamma - shaping_gamma) > 1e-12:
@@ -307,10 +316,16 @@ def _is_net_arch(v: Any) -> bool:
 
 def check_env_kwargs(env_kwargs: dict[str, Any]) -> None:
     """Build one environment from ``env_kwargs``: every field checked by the environment."""
-    from wsp_env.envs import make_core
+    from wsp_env.envs import check_action_repeat, make_core
 
+    kwargs = dict(env_kwargs)
+    if "action_repeat" in kwargs:  # the environment's, not the core's
+        try:
+            check_action_repeat(kwargs.pop("action_repeat"))
+        except ValueError as err:
+            raise ConfigError(f"env_kwargs.{err}") from None
     try:
-        make_core(1, **env_kwargs)
+        make_core(1, **kwargs)
     except ConfigError as err:
         raise ConfigError(f"env_kwargs.{err}") from None
     except (ValueError, TypeError) as err:
