@@ -114,3 +114,65 @@ def test_rail_aware_teacher_slides_where_the_rail_recovers():
     leaves_slide = np.mean([a["mean_sliding_kmh"] for a in leaves["axles"]])
     assert 1.5 < soap_slide < 5.0 and leaves_slide < 0.5 * soap_slide
     assert soap["max_lock_s"] == 0.0 and leaves["max_lock_s"] == 0.0
+
+
+HANDOVER = {**PRETRAIN, "rounds": 1, "steps_per_round": 1024, "warmup_steps": 512,
+            "epochs": 2, "warmup_episodes": 1}  # fmt: skip
+
+
+def _state(out):
+    import pickle
+
+    from wsp_env.training.train import latest_checkpoint
+
+    with (latest_checkpoint(out) / "state.pkl").open("rb") as fh:
+        return pickle.load(fh)
+
+
+def test_handover_keeps_the_students_actions_while_the_critic_warms_up(tmp_path):
+    """A tiny imitation -> PPO hand-over: with the critic warming up over the whole run, the
+    RL updates move the critic only; the actor (and its log-std) end exactly where the imitation
+    left them, the normalisation stays as fitted, and the warm-up covered whole stops."""
+    import pickle
+
+    import torch
+
+    env_kwargs = {"vehicle": "uic_z1", "accelerometer": True,
+                  "scenario": {"speed_kmh": [20, 30], "rails": {"soap": 1.0}}}  # fmt: skip
+    pre = {**HANDOVER, "critic_warmup_timesteps": 512, "anchor_coef": 1.0,
+           "anchor_timesteps": 512}  # fmt: skip
+    cfg = train_config(tmp_path, n_timesteps=512, env_kwargs=env_kwargs, pretrain=pre)
+    out = tmp_path / "run"
+    assert main(["train", "--config", str(cfg), "--out", str(out), "--no-progress"]) == 0
+    record = json.loads((out / "pretrain.json").read_text())
+    assert record["warmup_episodes_min"] >= 1  # every environment finished a whole stop
+    start = _state(out)["handover"]["anchor"]  # the student at the hand-over
+    final = SB3Policy(out / "model.zip").model.policy.state_dict()
+    actor = [k for k in start if k.startswith(("mlp_extractor.policy_net", "action_net"))]
+    actor.append("log_std")
+    critic = [k for k in start if k.startswith(("mlp_extractor.value_net", "value_net"))]
+    assert all(torch.equal(start[k], final[k]) for k in actor)
+    assert not all(torch.equal(start[k], final[k]) for k in critic)  # the critic learned
+    with (out / "model.vecnormalize.pkl").open("rb") as fh:
+        norm = pickle.load(fh)
+    assert norm.training is False  # frozen at the hand-over (freeze_normalization)
+
+
+def test_anchor_pull_decays_and_a_chunked_handover_resumes_bit_for_bit(tmp_path):
+    from test_train import _params, _same
+
+    from wsp_env.training.imitation import HandOver, PretrainConfig
+
+    h = HandOver.__new__(HandOver)
+    h.cfg, h.start_step, h.anchor = PretrainConfig(anchor_coef=2.0, anchor_timesteps=100), 0, 1
+    assert [h.anchor_weight(t) for t in (0, 50, 100, 200)] == [2.0, 1.0, 0.0, 0.0]
+    env_kwargs = {"vehicle": "uic_z1", "scenario": {"speed_kmh": [20, 30]}}
+    pre = {**HANDOVER, "warmup_episodes": 0, "critic_warmup_timesteps": 256,
+           "anchor_coef": 0.5, "anchor_timesteps": 2048}  # fmt: skip
+    cfg = train_config(tmp_path, n_timesteps=768, env_kwargs=env_kwargs, pretrain=pre)
+    one, part, rest = tmp_path / "one", tmp_path / "part", tmp_path / "rest"
+    assert main(["train", "--config", str(cfg), "--out", str(one), "--no-progress"]) == 0
+    assert main(["train", "--config", str(cfg), "--out", str(part), "--no-progress",
+                 "--chunk-timesteps", "512"]) == 0  # fmt: skip
+    assert main(["train", "--resume", str(part), "--out", str(rest), "--no-progress"]) == 0
+    assert _same(_params(one / "model.zip"), _params(rest / "model.zip"))

@@ -9,10 +9,26 @@ speed, an accelerometer if configured), normalised and frame-stacked exactly as 
 will see it. Rounds (Ross, Gordon & Bagnell 2011, DAgger): in round 0 the teacher drives; in
 later rounds the student drives (deterministic) and the teacher labels the states the student
 reaches; the actor is refitted on everything gathered so far after each round. The critic is
-fitted to the discounted (normalised) returns of the last round's rollouts, so that the first
-policy-gradient updates see sensible advantages. VecNormalize's statistics are warmed up on
-teacher-driven steps and held fixed while the data are gathered (the regression targets stay on
-one scale), then released for the reinforcement learning that follows.
+fitted to the discounted (normalised) returns of the last round's rollouts, bootstrapped at the
+round's end by its own value of the state reached (a stop of 15,000 steps is not cut to the
+round's 4,096), so that the first policy-gradient updates see sensible advantages.
+
+**The hand-over** (issue 23: the fine-tune of the first shipped student collapsed):
+
+* VecNormalize's statistics are fitted on teacher-driven **whole stops** (``warmup_episodes``:
+  until every environment has finished that many, at least ``warmup_steps``), not on the first
+  seconds of stops that all started together, and held fixed while the data are gathered;
+* with ``freeze_normalization`` (default) they stay fixed for the reinforcement learning that
+  follows (observation and reward scales: the fitted actor and critic keep their inputs and
+  targets), else they are released;
+* ``critic_warmup_timesteps``: the first RL updates move the critic only (``HandOver``: the
+  actor's parameters, its log-std included, do not move), so the actor's first gradients use a
+  critic fitted to the RL's own returns;
+* ``anchor_coef``: after each RL update, the actor is pulled back towards the imitation start's
+  actions on that update's own observations (least squares on the mean action, weight
+  ``anchor_coef``, decaying linearly to 0 over ``anchor_timesteps``): a behaviour-cloning term
+  to the student of the teacher that fades as RL takes over. The start's weights travel in every
+  checkpoint, so a resumed run pulls to the same start.
 """
 
 from __future__ import annotations
@@ -38,6 +54,13 @@ class PretrainConfig:
     batch_size: int = field(default=4096, metadata={"gt": 0})
     learning_rate: float = field(default=1e-3, metadata={"gt": 0.0})
     max_samples: int = field(default=1_000_000, metadata={"gt": 0})  # the newest are kept
+    # the hand-over to RL (module docstring)
+    warmup_episodes: int = field(default=1, metadata={"ge": 0})
+    freeze_normalization: bool = True
+    critic_warmup_timesteps: int = field(default=0, metadata={"ge": 0})
+    anchor_coef: float = field(default=0.0, metadata={"ge": 0.0})
+    anchor_timesteps: int = field(default=0, metadata={"ge": 0})
+    anchor_epochs: int = field(default=1, metadata={"gt": 0})
 
 
 def make_teacher(name: str) -> Any:
@@ -65,8 +88,17 @@ def pretrain(model: Any, env: Any, core: Any, cfg: PretrainConfig, gamma: float)
     n = core.n_envs
     teacher.reset(np.arange(n))
     obs = env.reset()
-    for _ in range(cfg.warmup_steps // n):  # normalisation statistics on teacher-driven states
+    # normalisation statistics on teacher-driven states: whole stops (every environment has
+    # finished warmup_episodes), and at least warmup_steps
+    finished = np.zeros(n, dtype=np.int64)
+    limit = cfg.warmup_steps // n + (WARMUP_STOP_STEPS_MAX if cfg.warmup_episodes else 0)
+    warm = 0
+    while warm < limit:
+        if warm >= cfg.warmup_steps // n and (finished >= cfg.warmup_episodes).all():
+            break
         obs, _, dones, _ = env.step(teacher.act(core.obs))
+        warm += 1
+        finished += dones
         if dones.any():
             teacher.reset(np.flatnonzero(dones))
     if norm is not None:
@@ -109,19 +141,97 @@ def pretrain(model: Any, env: Any, core: Any, cfg: PretrainConfig, gamma: float)
         actor_mean = partial(_actor_mean, policy)
         loss = _regress(actor_mean, opt_actor, x_all[:size], y_all[:size], cfg, rng, torch)
         after = _mae(policy, x_all[:size], y_all[:size], torch)
-        returns = _returns(r_rew, r_done, gamma).reshape(-1)
+        with torch.no_grad():  # the round's end bootstrapped by the critic's value there
+            tail = _critic_value(policy, torch.as_tensor(np.asarray(obs, dtype=np.float32)))
+        returns = _returns(r_rew, r_done, gamma, tail.numpy()).reshape(-1)
         v_loss = _regress(partial(_critic_value, policy), opt_critic,
                           r_obs.reshape(-1, r_obs.shape[2]), returns, cfg, rng, torch)  # fmt: skip
         mae = float(np.mean(agree)) if agree else None
         history.append({"round": rnd, "samples": int(size), "actor_mse": loss,
                         "critic_mse": v_loss, "student_vs_teacher_mae": mae,
                         "data_mae_before_fit": before, "data_mae_after_fit": after})  # fmt: skip
-    if norm is not None:
-        norm.training = True
+    if norm is not None:  # frozen for the RL that follows, or released
+        norm.training = not cfg.freeze_normalization
     model._last_obs = obs  # the first rollout continues from here
     model._last_episode_starts = dones
-    env_steps = (cfg.warmup_steps // n + cfg.rounds * steps) * n
-    return {"teacher": cfg.teacher, "env_steps": int(env_steps), "rounds": history}
+    env_steps = (warm + cfg.rounds * steps) * n
+    return {"teacher": cfg.teacher, "env_steps": int(env_steps), "warmup_steps": int(warm * n),
+            "warmup_episodes_min": int(finished.min()), "rounds": history}  # fmt: skip
+
+
+WARMUP_STOP_STEPS_MAX = 30_000  # per environment: twice the longest stop (600 s at 20 ms)
+
+
+class HandOver:
+    """The RL side of the hand-over (module docstring): the critic-only warm-up and the decaying
+    pull towards the imitation start. ``before_update(model)`` before each RL update,
+    ``after_update(model)`` after it; ``state()`` / ``load(state)`` for checkpoints."""
+
+    def __init__(self, model: Any, cfg: PretrainConfig, start_step: int = 0) -> None:
+        import copy
+
+        self.cfg = cfg
+        self.start_step = start_step  # where RL began (after the imitation)
+        self.anchor = copy.deepcopy(model.policy).eval() if cfg.anchor_coef > 0 else None
+        self._frozen: list[Any] = []
+
+    def _actor_params(self, model: Any) -> list[Any]:
+        policy = model.policy
+        params = [*policy.mlp_extractor.policy_net.parameters(), *policy.action_net.parameters()]
+        log_std = getattr(policy, "log_std", None)
+        return params + ([log_std] if log_std is not None else [])
+
+    def before_update(self, model: Any) -> None:
+        """The actor frozen while ``critic_warmup_timesteps`` last."""
+        warm = model.num_timesteps - self.start_step < self.cfg.critic_warmup_timesteps
+        for p in self._actor_params(model):
+            p.requires_grad_(not warm)
+
+    def anchor_weight(self, num_timesteps: int) -> float:
+        if self.anchor is None:
+            return 0.0
+        span = max(self.cfg.anchor_timesteps, 1)
+        done = (num_timesteps - self.start_step) / span
+        return self.cfg.anchor_coef * max(0.0, 1.0 - done)
+
+    def after_update(self, model: Any, observations: np.ndarray) -> float | None:
+        """The pull towards the start on ``observations`` (the update's rollout); returns the
+        mean squared distance before it (None when off)."""
+        import torch
+
+        for p in self._actor_params(model):
+            p.requires_grad_(True)
+        weight = self.anchor_weight(model.num_timesteps)
+        if weight <= 0.0 or self.anchor is None:
+            return None
+        policy = model.policy
+        obs = np.asarray(observations, dtype=np.float32)  # (n_steps, n_envs, obs_dim)
+        x = obs.reshape(-1, obs.shape[-1])
+        with torch.no_grad():
+            target = _actor_mean(self.anchor, torch.as_tensor(x))
+        rng = np.random.default_rng(int(model.num_timesteps))
+        first = None
+        for _ in range(self.cfg.anchor_epochs):
+            order = rng.permutation(len(x))
+            for i in range(0, len(x), self.cfg.batch_size):
+                idx = order[i : i + self.cfg.batch_size]
+                diff = _actor_mean(policy, torch.as_tensor(x[idx])) - target[idx]
+                loss = torch.mean(diff**2)
+                if first is None:
+                    first = float(loss.detach())
+                policy.optimizer.zero_grad()
+                (weight * loss).backward()
+                policy.optimizer.step()
+        return first
+
+    def state(self) -> dict[str, Any]:
+        return {"start_step": self.start_step,
+                "anchor": None if self.anchor is None else self.anchor.state_dict()}  # fmt: skip
+
+    def load(self, state: dict[str, Any]) -> None:
+        self.start_step = int(state["start_step"])
+        if self.anchor is not None and state.get("anchor") is not None:
+            self.anchor.load_state_dict(state["anchor"])
 
 
 def _find_wrapper(env: Any, name: str) -> Any:
@@ -133,9 +243,13 @@ def _find_wrapper(env: Any, name: str) -> Any:
     return None
 
 
-def _returns(rew: np.ndarray, done: np.ndarray, gamma: float) -> np.ndarray:
+def _returns(
+    rew: np.ndarray, done: np.ndarray, gamma: float, tail: np.ndarray | None = None
+) -> np.ndarray:
+    """Discounted returns of a rollout, each environment's last step bootstrapped by ``tail``
+    (its value of the state reached; zeros: none) unless its stop ended there."""
     out = np.zeros_like(rew)
-    acc = np.zeros(rew.shape[1], dtype=np.float32)
+    acc = np.zeros(rew.shape[1], dtype=np.float32) if tail is None else tail.astype(np.float32)
     for t in range(rew.shape[0] - 1, -1, -1):
         acc = rew[t] + gamma * acc * (~done[t])
         out[t] = acc

@@ -126,7 +126,7 @@ def save_policy_files(model: Any, stem: Path, cfg: TrainConfig) -> None:
         norm.save(str(stem.with_suffix(".vecnormalize.pkl")))
 
 
-def _save_checkpoint(model: Any, cfg: TrainConfig, folder: Path) -> None:
+def _save_checkpoint(model: Any, cfg: TrainConfig, folder: Path, handover: Any = None) -> None:
     """Everything a bit-for-bit resume needs, written to a temp folder and renamed."""
     import torch
 
@@ -150,6 +150,8 @@ def _save_checkpoint(model: Any, cfg: TrainConfig, folder: Path) -> None:
         "action_space_rng": model.action_space.np_random.bit_generator.state,
         "num_timesteps": model.num_timesteps,
         "run_total_timesteps": model.run_total_timesteps,
+        # the imitation start a fine-tune is pulled towards (imitation.HandOver)
+        "handover": None if handover is None else handover.state(),
     }
     with (tmp / "state.pkl").open("wb") as fh:
         pickle.dump(state, fh)
@@ -269,7 +271,8 @@ def _callbacks(cfg: TrainConfig, out: Path, total: int, progress: bool, state: d
                 state["validator"].evaluate(self.model, self.logger)
             if n >= self.next_ckpt:
                 self.next_ckpt = next_due(n, first, cfg.checkpoint_every_timesteps)
-                _save_checkpoint(self.model, cfg, out / "checkpoints" / f"step_{n}")
+                _save_checkpoint(self.model, cfg, out / "checkpoints" / f"step_{n}",
+                                 state["handover"])  # fmt: skip
 
     class Progress(BaseCallback):
         def _on_training_start(self) -> None:
@@ -288,7 +291,45 @@ def _callbacks(cfg: TrainConfig, out: Path, total: int, progress: bool, state: d
             self.bar.n = self.model.num_timesteps
             self.bar.close()
 
-    cbs = [thread_switch(state["threads"]), EpisodeMetrics(), Periodic()]
+    class HandOverSteps(BaseCallback):
+        """The hand-over's critic-only warm-up before each update and its pull towards the
+        imitation start after it (on the update's own observations, kept at the rollout's
+        end: the buffer is emptied before the next rollout starts)."""
+
+        def __init__(self) -> None:
+            super().__init__()
+            self.observations: np.ndarray | None = None
+
+        def _on_step(self) -> bool:
+            return True
+
+        def _on_rollout_end(self) -> None:
+            buffer = getattr(self.model, "rollout_buffer", None)
+            obs = getattr(buffer, "observations", None)
+            self.observations = None if obs is None else np.array(obs, copy=True)
+            state["handover"].before_update(self.model)
+
+        def _on_rollout_start(self) -> None:
+            self._after()
+
+        def _on_training_end(self) -> None:
+            self._after()
+
+        def _after(self) -> None:
+            if self.observations is None:
+                return
+            moved = state["handover"].after_update(self.model, self.observations)
+            if moved is not None:
+                self.logger.record("handover/anchor_mse", moved)
+            self.logger.record(
+                "handover/anchor_weight", state["handover"].anchor_weight(self.model.num_timesteps)
+            )
+            self.observations = None
+
+    cbs = [thread_switch(state["threads"])]
+    if state.get("handover") is not None:
+        cbs.append(HandOverSteps())
+    cbs += [EpisodeMetrics(), Periodic()]
     if progress:
         cbs.append(Progress())
     return CallbackList(cbs)
@@ -586,6 +627,13 @@ def _train(
             pretrained["wall_time_s"] = time.perf_counter() - t0
             pretrained["validation"] = validator.evaluate(model)  # the warm start, at step 0
             write_json(out / "pretrain.json", pretrained)
+        handover = None
+        if cfg.pretrain is not None:  # the RL side of the hand-over (imitation.HandOver)
+            from wsp_env.training.imitation import HandOver
+
+            handover = HandOver(model, cfg.pretrain)
+            if resume is not None and state.get("handover") is not None:
+                handover.load(state["handover"])
         formats = ["csv"] + (["tensorboard"] if _have_tensorboard() else [])
         model.set_logger(configure(str(out / "logs" / f"from_step_{start}"), formats))
         adaptive = AdaptiveThreads(policy_threads.update_torch_threads,
@@ -595,7 +643,13 @@ def _train(
             out,
             total,
             progress,
-            {"start": start, "validator": validator, "curve": curve, "threads": adaptive},
+            {
+                "start": start,
+                "validator": validator,
+                "curve": curve,
+                "threads": adaptive,
+                "handover": handover,
+            },
         )
         remaining = max(total - start, 0)
         if chunk_timesteps is not None:
@@ -615,7 +669,7 @@ def _train(
         ):  # the curve's last point where the run ends (not a chunk's end: a resumed run's
             curve.evaluate(model)  # curve is the one-go run's, row for row)
         save_policy_files(model, out / "model", cfg)
-        _save_checkpoint(model, cfg, out / "checkpoints" / f"step_{model.num_timesteps}")
+        _save_checkpoint(model, cfg, out / "checkpoints" / f"step_{model.num_timesteps}", handover)
         merge_progress(out)
         result = {
             "model_path": str(out / "best_model.zip"),
