@@ -159,7 +159,7 @@ def test_handover_keeps_the_students_actions_while_the_critic_warms_up(tmp_path)
 
 
 def test_anchor_pull_decays_and_a_chunked_handover_resumes_bit_for_bit(tmp_path):
-    from test_train import _params, _same
+    from test_train import model_params, same_params
 
     from wsp_env.training.imitation import HandOver, PretrainConfig
 
@@ -175,4 +175,4 @@ def test_anchor_pull_decays_and_a_chunked_handover_resumes_bit_for_bit(tmp_path)
     assert main(["train", "--config", str(cfg), "--out", str(part), "--no-progress",
                  "--chunk-timesteps", "512"]) == 0  # fmt: skip
     assert main(["train", "--resume", str(part), "--out", str(rest), "--no-progress"]) == 0
-    assert _same(_params(one / "model.zip"), _params(rest / "model.zip"))
+    assert same_params(model_params(one / "model.zip"), model_params(rest / "model.zip"))

@@ -71,7 +71,7 @@ def _sac(tmp_path):
     return path
 
 
-def _params(model_path):
+def model_params(model_path):
     from sb3_contrib import RecurrentPPO
     from stable_baselines3 import PPO, SAC
 
@@ -83,7 +83,7 @@ def _params(model_path):
     raise AssertionError(model_path)
 
 
-def _same(a, b):
+def same_params(a, b):
     return all(torch.equal(a[k], b[k]) for k in a)
 
 
@@ -196,7 +196,7 @@ def test_resume_in_chunks_is_bit_for_bit(tmp_path, kind):
                  "--chunk-timesteps", half]) == 0  # fmt: skip
     assert json.loads((part / "train.json").read_text())["finished"] is False
     assert main(["train", "--resume", str(part), "--out", str(rest), "--no-progress"]) == 0
-    assert _same(_params(one / "model.zip"), _params(rest / "model.zip"))
+    assert same_params(model_params(one / "model.zip"), model_params(rest / "model.zip"))
     with (
         (one / "model.vecnormalize.pkl").open("rb") as a,
         (rest / "model.vecnormalize.pkl").open("rb") as b,
@@ -240,7 +240,7 @@ def test_another_seed_is_another_run(ppo_run, tmp_path):
     other = tmp_path / "other"
     assert main(["train", "--config", str(cfg), "--out", str(other), "--seed", "4",
                  "--no-progress", "--total-timesteps", "512"]) == 0  # fmt: skip
-    assert not _same(_params(out / "model.zip"), _params(other / "model.zip"))
+    assert not same_params(model_params(out / "model.zip"), model_params(other / "model.zip"))
 
 
 def test_discrete_models_are_evaluated_in_discrete_mode(tmp_path):
