@@ -139,9 +139,12 @@ def test_handover_keeps_the_students_actions_while_the_critic_warms_up(tmp_path)
 
     env_kwargs = {"vehicle": "uic_z1", "accelerometer": True,
                   "scenario": {"speed_kmh": [20, 30], "rails": {"soap": 1.0}}}  # fmt: skip
+    # a constant learning rate (lin_ would end at 0 and hide a last update that moved);
+    # warm-up 512 steps = both rollouts' updates
     pre = {**HANDOVER, "critic_warmup_timesteps": 512, "anchor_coef": 1.0,
            "anchor_timesteps": 512}  # fmt: skip
-    cfg = train_config(tmp_path, n_timesteps=512, env_kwargs=env_kwargs, pretrain=pre)
+    cfg = train_config(tmp_path, n_timesteps=512, env_kwargs=env_kwargs, pretrain=pre,
+                       learning_rate=3e-4)  # fmt: skip
     out = tmp_path / "run"
     assert main(["train", "--config", str(cfg), "--out", str(out), "--no-progress"]) == 0
     record = json.loads((out / "pretrain.json").read_text())
@@ -156,6 +159,24 @@ def test_handover_keeps_the_students_actions_while_the_critic_warms_up(tmp_path)
     with (out / "model.vecnormalize.pkl").open("rb") as fh:
         norm = pickle.load(fh)
     assert norm.training is False  # frozen at the hand-over (freeze_normalization)
+
+
+def test_critic_warmup_of_one_rollout_freezes_exactly_the_first_update():
+    from types import SimpleNamespace
+
+    import torch
+
+    from wsp_env.training.imitation import HandOver, PretrainConfig
+
+    h = HandOver.__new__(HandOver)
+    h.cfg, h.start_step, h.anchor = PretrainConfig(critic_warmup_timesteps=256), 0, None
+    param = torch.nn.Parameter(torch.zeros(1))
+    h._actor_params = lambda model: [param]
+    frozen = []
+    for n in (256, 512, 768):  # num_timesteps at each rollout's end (rollouts of 8 x 32)
+        h.before_update(SimpleNamespace(num_timesteps=n, n_steps=32, n_envs=8))
+        frozen.append(not param.requires_grad)
+    assert frozen == [True, False, False]
 
 
 def test_anchor_pull_decays_and_a_chunked_handover_resumes_bit_for_bit(tmp_path):

@@ -177,16 +177,26 @@ def apply(policy: ThreadPolicy) -> ThreadPolicy:
 
 @contextlib.contextmanager
 def applied(policy: ThreadPolicy) -> Iterator[ThreadPolicy]:
-    """``apply(policy)`` for a ``with`` block; then the process's previous policy and torch
-    thread count come back (a training run inside a longer-lived process, a test)."""
+    """``apply(policy)`` for a ``with`` block; then the process's previous policy and torch's
+    and numba's thread counts come back (a training run inside a longer-lived process, a
+    test)."""
     saved = list(_ACTIVE)
     torch_before = _torch_threads()
+    numba_before = None
+    if policy.parallel_min_envs < NEVER:  # apply may change numba's count then only
+        import numba
+
+        numba_before = numba.get_num_threads()
     try:
         yield apply(policy)
     finally:
         _ACTIVE[:] = saved
         if torch_before is not None:
             set_torch_threads(torch_before)
+        if numba_before is not None:
+            import numba
+
+            numba.set_num_threads(numba_before)
 
 
 def _torch_threads() -> int | None:

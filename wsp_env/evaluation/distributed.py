@@ -110,6 +110,13 @@ class PolicySpec:
         here = os.getcwd()
         try:
             os.chdir(self.cwd)
+        except OSError:
+            raise ValueError(
+                f"policy {self.label}: the folder it was named from ({self.cwd}) is not on this "
+                "worker's machine (model files and modules must be at the same path on every "
+                "node)"
+            ) from None
+        try:
             policy = make_policy(self.name, self.wsp_config, tier=self.tier)
         finally:
             os.chdir(here)
@@ -183,7 +190,15 @@ class RayExecutor:
         ]
         results: list[dict[str, Any]] = []
         records: dict[tuple[str, int], Any] = {}
-        for res, rec in self.ray.get(futures):
+        try:
+            parts_done = self.ray.get(futures)
+        except self.ray.exceptions.RayTaskError as err:  # the worker's error, in one line
+            cause = err.cause if getattr(err, "cause", None) is not None else err
+            text = str(cause).strip().splitlines()
+            raise ValueError(
+                f"a worker failed: {text[0] if text else type(cause).__name__}"
+            ) from None
+        for res, rec in parts_done:
             results.extend(res)
             records.update(rec)
             if bar is not None:

@@ -138,6 +138,22 @@ def trial_config(
         raise _fail(sweep.source, where, str(err)) from None
 
 
+def _check_curve(sweep: SweepConfig, cfg: TrainConfig, where: str) -> None:
+    """A ``curve_*`` metric needs the learning curve on, at least once per report (else every
+    report would repeat an old row, or 0)."""
+    if not sweep.metric.startswith("curve_"):
+        return
+    every = cfg.eval.curve_every_timesteps
+    if every == 0:
+        raise _fail(sweep.source, "metric", f"{sweep.metric} needs the learning curve, but "
+                    f"{where}'s eval.curve_every_timesteps is 0")  # fmt: skip
+    if every > sweep.report_every_timesteps:
+        raise _fail(sweep.source, "report_every_timesteps",
+                    f"{sweep.report_every_timesteps} is shorter than {where}'s "
+                    f"eval.curve_every_timesteps ({every}): reports would repeat old curve "
+                    "rows")  # fmt: skip
+
+
 def _int(value: Any, source: str, where: str, low: int = 1) -> int:
     if isinstance(value, bool) or not isinstance(value, int) or value < low:
         raise _fail(source, where, f"expected an integer >= {low}, got {value!r}")
@@ -264,14 +280,15 @@ def load_sweep_config(path: str | Path) -> SweepConfig:
         where = "grid" if grid else "train"
         if grid:
             where = "grid (" + ", ".join(f"{k}={v!r}" for k, v in point.items()) + ")"
-        trial_config(sweep, point, seeds[0], where)
+        _check_curve(sweep, trial_config(sweep, point, seeds[0], where), where)
     if search is not None:
         for prm in search.space:
             probes = list(prm.values) if prm.type == "choice" else [prm.low, prm.high]
             for value in probes:
                 if prm.type == "int":
                     value = int(value)
-                trial_config(sweep, {prm.path: value}, seeds[0], f"search.space.{prm.path}")
+                where = f"search.space.{prm.path}"
+                _check_curve(sweep, trial_config(sweep, {prm.path: value}, seeds[0], where), where)
     return sweep
 
 

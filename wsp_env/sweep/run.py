@@ -74,6 +74,9 @@ def run_trial(config: dict[str, Any]) -> None:
     """Tune's trainable (runs in a Ray worker): train in chunks, report after each."""
     from ray import tune
 
+    # Tune starts a trial in its own folder: relative paths (the sweep's, the training
+    # config's suite or rails table) mean what they meant where the sweep was started
+    os.chdir(config["cwd"])
     os.environ[ENV_CORES] = str(max(1, int(config["cpus"])))
     folder = Path(config["sweep_dir"]) / TRIALS / tune.get_context().get_trial_id()
     sweep = load_sweep_config(Path(config["sweep_dir"]) / SWEEP_FILE)
@@ -106,7 +109,7 @@ def run_trial(config: dict[str, Any]) -> None:
 def _param_space(sweep: SweepConfig, sweep_dir: Path) -> dict[str, Any]:
     from ray import tune
 
-    common = {"sweep_dir": str(sweep_dir), "cpus": sweep.cpus}
+    common = {"sweep_dir": str(sweep_dir), "cpus": sweep.cpus, "cwd": os.getcwd()}
     if sweep.search is None:
         points = [{"overrides": p, "seed": s} for p in sweep.points() for s in sweep.seeds]
         return {**common, "trial": tune.grid_search(points)}
@@ -127,7 +130,7 @@ def _trainable(config: dict[str, Any]) -> None:
         overrides, seed = config["trial"]["overrides"], config["trial"]["seed"]
     else:
         overrides, seed = dict(config["search"]), config["seed"]
-    run_trial({"sweep_dir": config["sweep_dir"], "cpus": config["cpus"],
+    run_trial({"sweep_dir": config["sweep_dir"], "cpus": config["cpus"], "cwd": config["cwd"],
                "overrides": overrides, "seed": seed})  # fmt: skip
 
 
@@ -189,8 +192,8 @@ def collect(sweep: SweepConfig, sweep_dir: Path, grid: Any = None) -> dict[str, 
             overrides, seed = dict(cfg["search"]), cfg["seed"]
         metrics = res.metrics or {}
         # Tune adds the id to every report; a trial that failed before its first has none
-        trial_id = metrics.get("trial_id") or (Path(res.path).name if res.path else "?")
-        folder = sweep_dir / TRIALS / str(trial_id)
+        trial_id = metrics.get("trial_id") or "?"
+        folder = sweep_dir / TRIALS / str(trial_id)  # "?": no folder of its own is known
         done = folder / "train.json"
         finished = done.exists() and json.loads(done.read_text()).get("finished", False)
         row = {
@@ -219,8 +222,10 @@ def collect(sweep: SweepConfig, sweep_dir: Path, grid: Any = None) -> dict[str, 
             "metric_ci95": _interval(vals),
             "wall_time_s": sum(float(r["wall_time_s"] or 0.0) for r in members),
         })  # fmt: skip
+    # the best: a trial that ran its whole budget, before any stopped (pruned) at a smaller one
     ranked = [r for r in rows if r["metric"] is not None and r["status"] != "error"]
-    best = max(ranked, key=lambda r: r["metric"]) if ranked else None
+    best = (max(ranked, key=lambda r: (r["status"] == "finished", r["metric"]))
+            if ranked else None)  # fmt: skip
     return {"sweep": sweep.source, "metric": sweep.metric, "trials": rows, "summary": summary,
             "best": best}  # fmt: skip
 
@@ -257,7 +262,7 @@ def run_sweep(
     config: str | Path | None, out: str | Path, address: str | None = None, resume: bool = False
 ) -> dict[str, Any]:
     """Run (or ``resume``) a sweep into ``out`` (module docstring); returns ``results.json``."""
-    sweep_dir = Path(out)
+    sweep_dir = Path(out).resolve()  # the trials find it from their own folders
     if resume:
         if not (sweep_dir / SWEEP_FILE).exists() or not (sweep_dir / STATE).is_dir():
             raise ConfigError(f"{sweep_dir}: no sweep to resume (no {SWEEP_FILE} and {STATE}/)")

@@ -81,8 +81,8 @@ def _measure(
     from stable_baselines3.common.env_util import make_vec_env
 
     cfg = load_train_config(config)
-    if cfg.algo not in ("ppo", "a2c", "recurrent_ppo"):
-        raise ValueError(f"{config}: bench --train measures on-policy configs, not {cfg.algo}")
+    if cfg.algo not in ("ppo", "recurrent_ppo"):
+        raise ValueError(f"{config}: bench --train measures PPO configs, not {cfg.algo}")
     hyper = algo_hyperparams(cfg)
     if quick:
         import dataclasses

@@ -227,6 +227,11 @@ def parse_train_config(data: Any, source: str = "") -> TrainConfig:
         if k not in ENV_KWARGS:
             raise ConfigError(f"env_kwargs.{k}: unknown (allowed: {', '.join(ENV_KWARGS)})")
     eval_cfg = from_dict(EvalConfig, data.pop("eval", {}) or {}, "eval")
+    if eval_cfg.first_timesteps >= eval_cfg.every_timesteps:
+        raise ConfigError(
+            f"eval.first_timesteps: {eval_cfg.first_timesteps} is not before the first "
+            f"multiple of eval.every_timesteps ({eval_cfg.every_timesteps}); 0: automatic"
+        )
     pretrain_cfg = None
     if data.get("pretrain") is not None:
         from wsp_env.training.imitation import PretrainConfig

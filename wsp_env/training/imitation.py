@@ -25,9 +25,10 @@ round's 4,096), so that the first policy-gradient updates see sensible advantage
   actor's parameters, its log-std included, do not move), so the actor's first gradients use a
   critic fitted to the RL's own returns;
 * ``anchor_coef``: after each RL update, the actor is pulled back towards the imitation start's
-  actions on that update's own observations (least squares on the mean action, weight
-  ``anchor_coef``, decaying linearly to 0 over ``anchor_timesteps``): a behaviour-cloning term
-  to the student of the teacher that fades as RL takes over. The start's weights travel in every
+  actions on that update's own observations (plain gradient descent on the squared distance of
+  the mean actions, step ``learning_rate x weight``, the weight ``anchor_coef`` decaying
+  linearly to 0 over ``anchor_timesteps``): a behaviour-cloning term to the student of the
+  teacher that fades as RL takes over. The start's weights travel in every
   checkpoint, so a resumed run pulls to the same start.
 """
 
@@ -182,8 +183,11 @@ class HandOver:
         return params + ([log_std] if log_std is not None else [])
 
     def before_update(self, model: Any) -> None:
-        """The actor frozen while ``critic_warmup_timesteps`` last."""
-        warm = model.num_timesteps - self.start_step < self.cfg.critic_warmup_timesteps
+        """The actor frozen for the updates of rollouts that began within the first
+        ``critic_warmup_timesteps`` of RL (called at a rollout's end: it has been counted)."""
+        rollout = int(model.n_steps) * int(model.n_envs)
+        began = model.num_timesteps - rollout - self.start_step
+        warm = began < self.cfg.critic_warmup_timesteps
         for p in self._actor_params(model):
             p.requires_grad_(not warm)
 
@@ -210,6 +214,10 @@ class HandOver:
         with torch.no_grad():
             target = _actor_mean(self.anchor, torch.as_tensor(x))
         rng = np.random.default_rng(int(model.num_timesteps))
+        # plain gradient descent, step pretrain.learning_rate x weight: the weight is a real
+        # coefficient (Adam would divide its scale out) and PPO's optimiser moments stay PPO's
+        params = [*policy.mlp_extractor.policy_net.parameters(), *policy.action_net.parameters()]
+        opt = torch.optim.SGD(params, lr=self.cfg.learning_rate * weight)
         first = None
         for _ in range(self.cfg.anchor_epochs):
             order = rng.permutation(len(x))
@@ -219,9 +227,10 @@ class HandOver:
                 loss = torch.mean(diff**2)
                 if first is None:
                     first = float(loss.detach())
-                policy.optimizer.zero_grad()
-                (weight * loss).backward()
-                policy.optimizer.step()
+                opt.zero_grad()
+                loss.backward()
+                opt.step()
+        policy.optimizer.zero_grad()  # nothing of the pull left in the actor-critic's grads
         return first
 
     def state(self) -> dict[str, Any]:

@@ -249,13 +249,14 @@ def _callbacks(cfg: TrainConfig, out: Path, total: int, progress: bool, state: d
             self.next_ckpt = next_due(state["start"], first, cfg.checkpoint_every_timesteps)
             self.next_eval = next_due(state["start"], first, cfg.eval.every_timesteps)
             curve_every = cfg.eval.curve_every_timesteps
-            # the curve's points are the multiples of its cadence, step 0 included (the
-            # untrained or imitation policy); a chunk ending on one leaves it to the resume
+            # the curve's points: the first rollout start at or past each multiple of its
+            # cadence, step 0 included (the untrained or imitation policy); a call that ends
+            # with a point due takes it there (curve_due), so a resumed run's rows are the
+            # one-go run's
             start, self.next_curve = state["start"], None
             if curve_every:
-                have = {h["timesteps"] for h in state["curve"].history}
-                due_now = start % curve_every == 0 and start not in have
-                self.next_curve = start if due_now else next_due(start, 0, curve_every)
+                due = curve_due(state["curve"].history, start, curve_every)
+                self.next_curve = start if due else next_due(start, 0, curve_every)
 
         def _on_step(self) -> bool:
             return True
@@ -341,6 +342,13 @@ def first_timesteps(cfg: TrainConfig, total: int) -> int:
     if cfg.eval.first_timesteps:
         return cfg.eval.first_timesteps
     return max(1, min(cfg.eval.every_timesteps, total // 10))
+
+
+def curve_due(history: list[dict[str, Any]], n: int, every: int) -> bool:
+    """Whether the learning curve owes a point at step ``n``: none taken at or after the last
+    multiple of ``every`` up to ``n``."""
+    mark = (n // every) * every
+    return not any(h["timesteps"] >= mark for h in history)
 
 
 def next_due(n: int, first: int, every: int) -> int:
@@ -662,12 +670,13 @@ def _train(
         steps = int(model.num_timesteps) - start
         final = validator.evaluate(model)
         n_now = int(model.num_timesteps)
-        if (
-            curve is not None
-            and n_now >= total
-            and (not curve.history or curve.history[-1]["timesteps"] != n_now)
-        ):  # the curve's last point where the run ends (not a chunk's end: a resumed run's
-            curve.evaluate(model)  # curve is the one-go run's, row for row)
+        if curve is not None:
+            every = cfg.eval.curve_every_timesteps
+            last = curve.history[-1]["timesteps"] if curve.history else -1
+            # a point due where this call ends (the one-go run takes it at its next rollout's
+            # start, at this same step), and the run's last point where it ends
+            if curve_due(curve.history, n_now, every) or (n_now >= total and last != n_now):
+                curve.evaluate(model)
         save_policy_files(model, out / "model", cfg)
         _save_checkpoint(model, cfg, out / "checkpoints" / f"step_{model.num_timesteps}", handover)
         merge_progress(out)
@@ -767,6 +776,7 @@ __all__ = [
     "LinearSchedule",
     "TrainConfig",
     "Validator",
+    "curve_due",
     "first_timesteps",
     "latest_checkpoint",
     "load_train_config",
