@@ -30,30 +30,35 @@ SUITE = {
 }  # fmt: skip
 
 
-def _files(tmp_path, sweep, n_timesteps=512):
+def _files(tmp_path, sweep, n_timesteps=512, relative=False):
+    """The sweep file, its base training config and suite in ``tmp_path``; ``relative``: the
+    files name each other by paths relative to ``tmp_path`` (where the sweep then starts)."""
+    where = (lambda name: name) if relative else (lambda name: str(tmp_path / name))
     (tmp_path / "suite.yaml").write_text(yaml.safe_dump(SUITE))
     train = {
         "algo": "ppo", "n_envs": 8, "n_timesteps": n_timesteps, "seed": 3, "normalize": True,
         "policy_kwargs": {"net_arch": [16, 16]}, "learning_rate": 3.0e-4, "n_steps": 32,
         "batch_size": 64, "n_epochs": 2, "gamma": 0.999,
         "env_kwargs": {"vehicle": "uic_z1", "scenario": {"speed_kmh": [30, 40]}},
-        "eval": {"suite": str(tmp_path / "suite.yaml"), "every_timesteps": 256,
+        "eval": {"suite": where("suite.yaml"), "every_timesteps": 256,
                  "curve_every_timesteps": 256, "curve_runs": 2},
         "checkpoint_every_timesteps": 256,
     }  # fmt: skip
     (tmp_path / "train.yaml").write_text(yaml.safe_dump(train))
     path = tmp_path / "sweep.yaml"
-    path.write_text(yaml.safe_dump({"train": str(tmp_path / "train.yaml"), **sweep}))
+    path.write_text(yaml.safe_dump({"train": where("train.yaml"), **sweep}))
     return path
 
 
 def test_grid_writes_its_table_summary_and_best_config(tmp_path, monkeypatch):
+    """Started with relative paths everywhere (the sweep file, its training config, that
+    config's suite, --out), as a user types them: the trials find them all."""
     monkeypatch.setenv("WSP_CORES", "2")
-    cfg = _files(tmp_path, {"seeds": [0, 1], "report_every_timesteps": 256,
-                            "grid": {"gae_lambda": [0.95]}})  # fmt: skip
+    monkeypatch.chdir(tmp_path)
+    _files(tmp_path, {"seeds": [0, 1], "report_every_timesteps": 256,
+                      "grid": {"gae_lambda": [0.95]}}, relative=True)  # fmt: skip
     out = tmp_path / "out"
-    assert main(["sweep", "--config", str(cfg), "--out", str(out), "--json",
-                 str(tmp_path / "r.json")]) == 0  # fmt: skip
+    assert main(["sweep", "--config", "sweep.yaml", "--out", "out", "--json", "r.json"]) == 0
     r = json.loads((out / "results.json").read_text())
     assert [t["seed"] for t in r["trials"]] == [0, 1]
     assert all(t["status"] == "finished" and t["timesteps"] == 512 for t in r["trials"])
@@ -130,6 +135,9 @@ def test_a_killed_sweep_resumes_without_redoing_finished_trials(tmp_path):
          "search.space.gamma.type: 'normal' is not one of"),
         ({"colour": "red"}, "colour: unknown field"),
         ({"resources": {"cpus": 64}}, "resources.cpus: 64 per trial, but this machine has 2"),
+        ({"report_every_timesteps": 100}, "report_every_timesteps: 100 is shorter than"),
+        ({"grid": {"eval.curve_every_timesteps": [0]}},
+         "metric: curve_score needs the learning curve"),
     ],
 )  # fmt: skip
 def test_bad_sweep_file_is_one_line_naming_the_field(tmp_path, capsys, monkeypatch, sweep, message):

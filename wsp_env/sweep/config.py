@@ -9,7 +9,8 @@ Fields:
 * ``seeds``: the training seeds each grid point runs with (default ``[0]``); a search trains
   each sampled configuration with one seed (list one; run the best over seeds as a grid).
 * ``report_every_timesteps``: a trial trains in chunks of this many steps (each ends with a
-  checkpoint) and reports its learning curve after each (default: a tenth of the budget).
+  checkpoint) and reports its learning curve after each (default: a tenth of the budget, but
+  no shorter than the base's curve cadence and no longer than the budget).
 * ``metric``: what ranks trials and prunes them: ``curve_score`` (default: the fixed-seed
   learning curve's last score, 0 locked wheels, 1 the classical WSP), ``curve_mean_return``,
   ``validation_passed``.
@@ -147,7 +148,7 @@ def _check_curve(sweep: SweepConfig, cfg: TrainConfig, where: str) -> None:
     if every == 0:
         raise _fail(sweep.source, "metric", f"{sweep.metric} needs the learning curve, but "
                     f"{where}'s eval.curve_every_timesteps is 0")  # fmt: skip
-    if every > sweep.report_every_timesteps:
+    if every > sweep.report_every_timesteps and sweep.report_every_timesteps < sweep.n_timesteps:
         raise _fail(sweep.source, "report_every_timesteps",
                     f"{sweep.report_every_timesteps} is shorter than {where}'s "
                     f"eval.curve_every_timesteps ({every}): reports would repeat old curve "
@@ -222,7 +223,11 @@ def load_sweep_config(path: str | Path) -> SweepConfig:
     seeds = tuple(_int(s, source, f"seeds[{i}]", low=0) for i, s in enumerate(seeds))
     if len(set(seeds)) < len(seeds):
         raise _fail(source, "seeds", "a seed is listed twice")
-    report = _int(data.get("report_every_timesteps", max(1, n_timesteps // 10)), source,
+    # default: a tenth of the budget, but no shorter than the base's learning-curve cadence
+    # (every report a fresh curve row) and no longer than the budget
+    curve_every = int((base.get("eval") or {}).get("curve_every_timesteps", 250_000) or 0)
+    default_report = min(n_timesteps, max(1, n_timesteps // 10, curve_every))
+    report = _int(data.get("report_every_timesteps", default_report), source,
                   "report_every_timesteps")  # fmt: skip
     metric = data.get("metric", "curve_score")
     if metric not in METRICS:
