@@ -50,3 +50,20 @@ def single(vehicle, rail: str | object, speed_kmh: float = 120.0, dt_s: float = 
 @pytest.fixture
 def rng() -> np.random.Generator:
     return np.random.default_rng(1234)
+
+
+@pytest.fixture(scope="session")
+def local_ray():
+    """One local Ray for the tests that split work across workers (each command would
+    otherwise start and stop its own: seconds each); ``ray_session`` uses it as it is. A test
+    that must start or attach its own shuts it down first (``test_sweep``'s attach test)."""
+    import logging
+    import os
+
+    ray = pytest.importorskip("ray")
+    os.environ.setdefault("RAY_AUTH_MODE", "disabled")
+    if not ray.is_initialized():
+        ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False,
+                 logging_level=logging.ERROR)  # fmt: skip
+    yield ray
+    ray.shutdown()

@@ -27,7 +27,7 @@ def _run(tmp_path, name, argv):
     return json.loads(out.read_text())
 
 
-def test_benchmark_over_two_workers_equals_one_process(tmp_path):
+def test_benchmark_over_two_workers_equals_one_process(tmp_path, local_ray):
     argv = ["benchmark", "--policy", "classical", "--policy", "ppo_bc_uic_z1",
             "--tier", "wheels+accel", "--runs", "6"]  # fmt: skip
     one = _run(tmp_path, "one", argv)
@@ -36,7 +36,7 @@ def test_benchmark_over_two_workers_equals_one_process(tmp_path):
     assert len(one["run_results"]["ppo_bc_uic_z1"]) == 6
 
 
-def test_evaluate_over_two_workers_equals_one_process_with_its_report(tmp_path):
+def test_evaluate_over_two_workers_equals_one_process_with_its_report(tmp_path, local_ray):
     argv = ["evaluate", "--policy", "classical", "--policy", "none", "--suite", "quick"]
     one = _run(tmp_path, "one", [*argv, "--report", str(tmp_path / "r1")])
     two = _run(tmp_path, "two", [*argv, "--workers", "2", "--report", str(tmp_path / "r2")])

@@ -50,7 +50,7 @@ def _files(tmp_path, sweep, n_timesteps=512, relative=False):
     return path
 
 
-def test_grid_writes_its_table_summary_and_best_config(tmp_path, monkeypatch):
+def test_grid_writes_its_table_summary_and_best_config(tmp_path, monkeypatch, local_ray):
     """Started with relative paths everywhere (the sweep file, its training config, that
     config's suite, --out), as a user types them: the trials find them all."""
     monkeypatch.setenv("WSP_CORES", "2")
@@ -75,7 +75,7 @@ def test_grid_writes_its_table_summary_and_best_config(tmp_path, monkeypatch):
     assert "| trial | overrides | seed |" in (out / "results.md").read_text()
 
 
-def test_search_samples_the_space_with_optuna(tmp_path, monkeypatch):
+def test_search_samples_the_space_with_optuna(tmp_path, monkeypatch, local_ray):
     monkeypatch.setenv("WSP_CORES", "2")
     cfg = _files(tmp_path, {"report_every_timesteps": 256, "search": {
         "space": {"learning_rate": {"type": "loguniform", "low": 1e-5, "high": 1e-3},
@@ -91,9 +91,9 @@ def test_search_samples_the_space_with_optuna(tmp_path, monkeypatch):
     assert (out / "best.yaml").exists()
 
 
-def test_a_killed_sweep_resumes_without_redoing_finished_trials(tmp_path):
+def test_a_killed_sweep_resumes_without_redoing_finished_trials(tmp_path, local_ray):
     cfg = _files(tmp_path, {"seeds": [0, 1], "report_every_timesteps": 256,
-                            "resources": {"cpus": 2}}, n_timesteps=1024)  # fmt: skip
+                            "resources": {"cpus": 2}}, n_timesteps=768)  # fmt: skip
     out = tmp_path / "out"
     env = {**os.environ, "WSP_CORES": "2"}  # one trial at a time
     cmd = [sys.executable, "-m", "wsp_env.cli", "sweep", "--config", str(cfg), "--out", str(out)]
@@ -168,6 +168,9 @@ def test_attaches_to_a_running_cluster_with_the_same_file(tmp_path, monkeypatch)
     with socket.socket() as s:  # a free port
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
+    import ray as ray_module
+
+    ray_module.shutdown()  # attach from a process with no Ray of its own (the shared one)
     ray = str(Path(sys.executable).with_name("ray"))
     env = {**os.environ, "RAY_AUTH_MODE": "disabled"}
     start = [ray, "start", "--head", f"--port={port}", "--num-cpus=2",
@@ -181,7 +184,7 @@ def test_attaches_to_a_running_cluster_with_the_same_file(tmp_path, monkeypatch)
                      "--address", address]) == 0  # fmt: skip
         r = json.loads((tmp_path / "out" / "results.json").read_text())
         assert r["address"] == address and r["trials"][0]["status"] == "finished"
-        argv = ["benchmark", "--policy", "classical", "--tier", "wheels", "--runs", "4",
+        argv = ["benchmark", "--policy", "classical", "--tier", "wheels", "--runs", "2",
                 "--no-progress"]  # fmt: skip
         assert main([*argv, "--address", address, "--json", str(tmp_path / "a.json")]) == 0
         assert main([*argv, "--json", str(tmp_path / "b.json")]) == 0

@@ -47,7 +47,9 @@ def ray_session(address: str | None = None, num_cpus: int | None = None) -> Iter
     ``num_cpus`` CPUs (quietly: warnings only on failure); shut down after if started here.
     Already initialised (a caller's session): used as it is."""
     ray = require_ray()
-    if ray.is_initialized():
+    if ray.is_initialized():  # a caller's session (a test's, a notebook's): used as it is
+        if address:
+            _check_reachable(address)
         yield ray
         return
     os.environ.setdefault("RAY_AUTH_MODE", "disabled")  # a local, single-user session
