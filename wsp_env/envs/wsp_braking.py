@@ -523,9 +523,9 @@ class WSPBrakingVectorEnv(VectorEnv):
         a = core.check_actions(actions)
         if self.action_repeat == 1:
             core.step(a)
-            terms = core.terms.copy()
+            terms = core.terms  # read before the next step: no copy
             core.episode_return += terms.sum(axis=1)
-            core.episode_terms += core.terms
+            core.episode_terms += terms
             self.episode_periods += 1
             terminated = core.flags[:, K.F_TERMINATED].astype(bool)
             truncated = core.flags[:, K.F_TRUNCATED].astype(bool)
