@@ -56,7 +56,8 @@ GRID: dict[str, tuple[list[float], float]] = {
     "pad_friction": ([0.05, 0.10, 0.20], 0.10),  # fraction off nominal
     "unmeasured_brake_force": ([1500.0, 3000.0, 6000.0], 3000.0),  # N
     "running_resistance": ([1.5, 2.0, 3.0], 2.0),  # factor
-    "pressure_lag": ([0.1, 0.2, 0.4], 0.2),  # s
+    "pressure_lag": ([0.1, 0.2, 0.4], 0.2),  # s, a dead time
+    "pressure_time_constant": ([0.15, 0.3, 0.6], 0.3),  # s, a first-order lag
     "sensor_scale": ([0.0075, 0.015, 0.03], 0.015),  # fraction
     "sensor_lag": ([0.1, 0.2, 0.4], 0.2),  # s
     "load_transfer": ([1.5, 2.0, 3.0], 2.0),  # factor
@@ -67,9 +68,14 @@ PAIRS = [
     (("gradient", 6.0), ("wheel_radius", 0.012)),
     (("unmeasured_brake_force", 4000.0), ("pressure_lag", 0.3)),
     (("gradient", 6.0), ("sensor_scale", 0.02)),
+    (("pressure_lag", 0.15), ("pressure_time_constant", 0.3)),  # both lag shapes at once
 ]
 # the loop's category for each generator category, and the parameter compared
-LOOP_CATEGORY = {"sensor_scale": "sensor", "sensor_lag": "sensor"}
+LOOP_CATEGORY = {"sensor_scale": "sensor", "sensor_lag": "sensor",
+                 "pressure_time_constant": "pressure_lag"}  # fmt: skip
+# a lag is found in its shape: the parameter the loop's pressure lag must carry
+SHAPE_KEY = {"pressure_lag": "lag_s", "pressure_time_constant": "time_constant_s",
+             "sensor_scale": "speed_scale_error", "sensor_lag": "speed_lag_s"}  # fmt: skip
 # Adhesion effects are seen only where the wheels reach the adhesion limit: on a wet or dry rail
 # an emergency stop hardly slides, the adhesion channel has no evidence and the effect is
 # unobservable by any method. Their scenarios draw a low-adhesion contaminant (the generator's
@@ -106,6 +112,8 @@ def _true_and_found(effect: Any, step: dict[str, Any], trace_meta: dict) -> tupl
         return p["force_N"], q.get("force_at_full_demand_N", math.nan)
     if cat == "pressure_lag":
         return p["lag_s"], q.get("lag_s", math.nan)
+    if cat == "pressure_time_constant":
+        return p["time_constant_s"], q.get("time_constant_s", math.nan)
     if cat == "sensor_scale":
         return p["scale_error"], q.get("speed_scale_error", math.nan)
     if cat == "sensor_lag":
@@ -165,8 +173,12 @@ def _run_one(job: dict[str, Any]) -> dict[str, Any]:
     for eff in effects:
         want = LOOP_CATEGORY.get(eff.category, eff.category)
         hits = [s for s in added if s["category"] == want]
-        if eff.category.startswith("sensor_"):  # scale vs lag: the parameter tells them apart
-            key = "speed_scale_error" if eff.category == "sensor_scale" else "speed_lag_s"
+        any_shape, other_form = bool(hits), False
+        if eff.category in SHAPE_KEY:  # scale vs lag, dead time vs time constant: the
+            key = SHAPE_KEY[eff.category]  # parameter tells them apart
+            # found in another form, with this one declared as equally good
+            other_form = any(key in a.get("parameters", {}) for s in hits
+                             for a in s.get("alternative_fits", []))  # fmt: skip
             hits = [s for s in hits if key in s["parameters"]]
         # a choice made inside the tie margin: the effect found while another explains as
         # well, or another chosen while this one is named among its equally good alternatives
@@ -177,8 +189,10 @@ def _run_one(job: dict[str, Any]) -> dict[str, Any]:
         else:
             tied = {s["category"] for s in added
                     if any(want in alt.split("+") for alt in s["alternatives"])}  # fmt: skip
-        row = {"category": eff.category, "found": bool(hits), "named": bool(hits or tied),
-               "tied_with": sorted(tied),
+        row = {"category": eff.category, "found": bool(hits),
+               "named": bool(hits or tied or other_form),
+               "alone": bool(hits) and not hits[0].get("ambiguous", False),
+               "category_found": any_shape, "tied_with": sorted(tied),
                "true": math.nan, "value": math.nan, "cut": math.nan}  # fmt: skip
         if hits:
             true, value = _true_and_found(eff, hits[0], meta)
@@ -203,6 +217,7 @@ def _run_one(job: dict[str, Any]) -> dict[str, Any]:
             "lead_in_s": scenario.lead_in_s, "contaminant": scenario.contaminant,
             "adhesion_fits": adhesion_fits, "true_bogie_pitch_kN_per_mps2": true_pitch,
             "step_evidence": evidence,
+            "pivot_in_metadata": scenario.pivot_in_metadata and scenario.geometry_in_metadata,
             "effect_params": [e.params for e in effects]}  # fmt: skip
 
 
@@ -232,12 +247,14 @@ def _step_evidence(ind: Any, scenario: Any, effects: list[Any], step: Any, seed:
 
 def _true_bogie_pitch(scenario: Any, effects: list[Any]) -> float:
     """The generator's bogie pitch per axle (kN per m/s^2, the cars' mean), times any load
-    transfer factor: what the loop's ``bogie_pitch_kN_per_mps2`` measures (the metadata gives
-    no pivot height, so the nominal model has none)."""
+    transfer factor, less what the metadata declares: what the loop's
+    ``bogie_pitch_kN_per_mps2`` measures (a trace that gives the pivot height declares the
+    nominal pitch, computed the generator's way by the reader; one without leaves it all)."""
     factor = math.prod(e.params["factor"] for e in effects if e.category == "load_transfer")
     car_mass = 4000.0 * float(np.mean(scenario.car_axle_load_t))
     pitch = car_mass * scenario.bogie_pivot_height_m / (2.0 * scenario.bogie_wheelbase_m)
-    return factor * pitch / 1e3
+    declared = pitch if (scenario.pivot_in_metadata and scenario.geometry_in_metadata) else 0.0
+    return (factor * pitch - declared) / 1e3
 
 
 def _jobs(args: argparse.Namespace) -> list[dict[str, Any]]:
@@ -307,6 +324,10 @@ def summarise(results: list[dict[str, Any]]) -> dict[str, Any]:
                 "n": len(rs),
                 "detection_rate": len(found) / len(rs),
                 "found_or_named_rate": float(np.mean([e.get("named", e["found"]) for e in eff])),
+                "alone_rate": float(np.mean([e.get("alone", e["found"]) for e in eff])),
+                "category_rate": float(np.mean([e.get("category_found", e["found"])
+                                                for e in eff])),
+                "geometry": _by_geometry(rs),
                 "tied_rate": float(np.mean([bool(e.get("tied_with")) for e in eff])),
                 "tied": int(sum(bool(e.get("tied_with")) for e in eff)),
                 "tied_won": int(sum(bool(e.get("tied_with")) and e["found"] for e in eff)),
@@ -322,6 +343,10 @@ def summarise(results: list[dict[str, Any]]) -> dict[str, Any]:
                 sliding = [r for r in clean if r.get("contaminant") in SLIDING_RAILS[0]]
                 if cat == "load_transfer" and sliding:  # like for like: the effect's rails
                     rows[-1]["pitch_threshold"] = pitch_threshold(sliding, rs)
+                    geo = [r for r in sliding if r.get("pivot_in_metadata")]
+                    geo_rs = [r for r in rs if r.get("pivot_in_metadata")]
+                    if geo and geo_rs:  # the nominal pitch declared: a departure stands alone
+                        rows[-1]["pitch_threshold_geometry"] = pitch_threshold(geo, geo_rs)
         detected = [row["magnitude"] for row in rows if row["detection_rate"] >= 0.9]
         target = GRID[cat][1]
         at_target = [row for row in rows if row["magnitude"] == target]
@@ -342,6 +367,18 @@ def summarise(results: list[dict[str, Any]]) -> dict[str, Any]:
             "first_only_rate": float(np.mean([r["effects_found"][0]["found"] and not
                                               r["effects_found"][1]["found"] for r in rs])),
         })  # fmt: skip
+    return out
+
+
+def _by_geometry(rs: list[dict[str, Any]]) -> dict[str, dict[str, float]]:
+    """Detection on the traces whose metadata gives the bogie pivot height (the full geometry)
+    and on those without it."""
+    out = {}
+    for key, want in (("with", True), ("without", False)):
+        sub = [r for r in rs if bool(r.get("pivot_in_metadata")) is want]
+        if sub:
+            out[key] = {"n": len(sub), "detection_rate": float(np.mean(
+                [r["effects_found"][0]["found"] for r in sub]))}  # fmt: skip
     return out
 
 
@@ -420,17 +457,33 @@ def print_table(summary: dict[str, Any]) -> None:
               f"{pitch['n']} fitted): median {pitch['median']:+.1f}, 5-95 % "
               f"{pitch['p5']:+.1f} .. {pitch['p95']:+.1f}")  # fmt: skip
     print(f"{'category':24s} {'magnitude':>10s} {'n':>4s} {'detect':>7s} {'or alt':>7s} "
-          f"{'param err':>9s} {'cut':>6s} {'extra':>6s}")  # fmt: skip
+          f"{'alone':>6s} {'param err':>9s} {'cut':>6s} {'extra':>6s}")  # fmt: skip
     for cat, info in summary["categories"].items():
         for row in info["rows"]:
             mark = " <- target" if row["magnitude"] == info["target_magnitude"] else ""
             err = 100 * row["param_rel_error_median"]
             print(f"{cat:24s} {row['magnitude']:10.4g} {row['n']:4d} "
                   f"{100 * row['detection_rate']:6.0f}% "
-                  f"{100 * row['found_or_named_rate']:6.0f}% {err:8.0f}% "
+                  f"{100 * row['found_or_named_rate']:6.0f}% "
+                  f"{100 * row.get('alone_rate', math.nan):5.0f}% {err:8.0f}% "
                   f"{100 * row['cut_median']:5.0f}% {100 * row['extra_effect_rate']:5.0f}%{mark}"
                   f"{' ' + ','.join(row['extra']) if row['extra'] else ''}")  # fmt: skip
         for row in info["rows"]:
+            if cat.startswith("pressure_") and row["category_rate"] != row["detection_rate"]:
+                print(f"{'':24s} {row['magnitude']:10.4g}: a pressure lag of any shape "
+                      f"{100 * row['category_rate']:.0f} %")  # fmt: skip
+            geo = row.get("geometry", {})
+            if cat == "load_transfer" and geo:
+                print(f"{'':24s} {row['magnitude']:10.4g}: " + "; ".join(
+                    f"{k} the pivot height in the metadata {100 * v['detection_rate']:.0f} % "
+                    f"(n {v['n']})" for k, v in geo.items()))  # fmt: skip
+                thg = row.get("pitch_threshold_geometry")
+                if thg:
+                    print(f"{'':24s} {'':10s}  with it, a threshold on the fitted departure "
+                          f"that <= {100 * TARGETS['false_positive_max']:g} % of the "
+                          f"{thg['clean']} clean traces with it reach finds "
+                          f"{100 * thg['detection']:.0f} % "
+                          f"(at {thg['threshold']:.1f})")  # fmt: skip
             if "tried_rate" in row:
                 th = row.get("pitch_threshold")
                 at = (f"; a threshold on it that <= {100 * TARGETS['false_positive_max']:g} % "
@@ -470,7 +523,8 @@ UNITS = {
     "pad_friction": "fraction",
     "unmeasured_brake_force": "N",
     "running_resistance": "factor",
-    "pressure_lag": "s",
+    "pressure_lag": "s, dead time",
+    "pressure_time_constant": "s, first order",
     "sensor_scale": "fraction",
     "sensor_lag": "s",
     "load_transfer": "factor",
@@ -484,11 +538,13 @@ def markdown_table(summary: dict[str, Any]) -> str:
     lines = [
         f"Per category at its target magnitude (detection target {100 * target:.0f} %); *or alt*: "
         "chosen, or named among the chosen effect's equally good `alternatives` (never counted "
-        "as detected); *extra*: traces where another effect was added as well.",
+        "as detected); *alone*: detected and not declared ambiguous (no alternative inside the "
+        "tie margin); *extra*: traces where another effect was added as well. A pressure lag is "
+        "detected in its shape (a dead time's `lag_s`, a first-order lag's `time_constant_s`).",
         "",
-        "| category | target (unit) | n | detected | or alt | smallest at >= 90 % "
+        "| category | target (unit) | n | detected | or alt | alone | smallest at >= 90 % "
         "| parameter error | extra | met |",
-        "|---|---|---:|---:|---:|---|---:|---:|---|",
+        "|---|---|---:|---:|---:|---:|---|---:|---:|---|",
     ]
     for cat, info in summary["categories"].items():
         rows = [r for r in info["rows"] if r["magnitude"] == info["target_magnitude"]]
@@ -501,6 +557,7 @@ def markdown_table(summary: dict[str, Any]) -> str:
         lines.append(
             f"| {cat} | {info['target_magnitude']:g} ({UNITS.get(cat, '')}) | {r['n']} | "
             f"{100 * r['detection_rate']:.0f} % | {100 * r['found_or_named_rate']:.0f} % | "
+            f"{100 * r.get('alone_rate', math.nan):.0f} % | "
             f"{'—' if smallest is None else f'{smallest:g}'} | {err_text} | "
             f"{100 * r['extra_effect_rate']:.0f} % | "
             f"{'yes' if r['detection_rate'] >= target else 'no'} |"

@@ -151,6 +151,28 @@ def _mutations():
         rows[12][h.index("v_axle_4_kmh")] = "-40"
         return h, rows, m
 
+    def pivot_in_mm(h, rows, m):  # optional geometry, a unit error
+        m["vehicle"]["bogie_pivot_height_m"] = 650
+        return h, rows, m
+
+    def pivot_text(h, rows, m):
+        m["vehicle"]["bogie_pivot_height_m"] = "0.65"
+        return h, rows, m
+
+    def bogie_longer_than_car(h, rows, m):
+        m["vehicle"]["bogie_wheelbase_m"] = 3.0
+        m["vehicle"]["bogie_centre_distance_m"] = 2.5
+        return h, rows, m
+
+    def bogie_height_without_mass(h, rows, m):
+        m["vehicle"]["bogie_cog_height_m"] = 0.5
+        return h, rows, m
+
+    def heavy_bogies(h, rows, m):
+        m["vehicle"]["bogie_cog_height_m"] = 0.5
+        m["vehicle"]["bogie_mass_kg"] = 25000.0
+        return h, rows, m
+
     return [
         (drop_axle, "'p_cyl_3_bar': required but missing"),
         (time_back, "'time_s': not strictly increasing"),
@@ -165,6 +187,11 @@ def _mutations():
         (short_row, "fields, header has"),
         (no_mass, "vehicle.mass_kg"),
         (negative_speed, "negative speed"),
+        (pivot_in_mm, "vehicle.bogie_pivot_height_m: must be a number in [0.1, 2], got 650"),
+        (pivot_text, "vehicle.bogie_pivot_height_m: must be a number in"),
+        (bogie_longer_than_car, "vehicle.bogie_wheelbase_m: 3 m is not shorter than"),
+        (bogie_height_without_mass, "vehicle.bogie_cog_height_m and bogie_mass_kg: give both"),
+        (heavy_bogies, "vehicle.bogie_mass_kg: 2 bogies of 25000 kg"),
     ]
 
 

@@ -46,6 +46,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy.integrate import cumulative_trapezoid
@@ -136,8 +137,10 @@ def normal_loads(trace: Trace, decel: np.ndarray) -> np.ndarray:
 
     The transfer is the metadata's ``axle_load_transfer_kN_per_mps2`` (body and bogie pitch per
     axle, N = N_static + k a) when given; else the body's ``+- m a h / L`` on the leading /
-    trailing bogie from ``cog_height_m`` and ``bogie_centre_distance_m`` (bogie pitch, which
-    needs pivot heights, is then left to the calibration loop's ``load_transfer`` effect).
+    trailing bogie from ``cog_height_m`` and ``bogie_centre_distance_m``, plus, where the
+    metadata gives ``bogie_pivot_height_m`` and ``bogie_wheelbase_m``, each bogie's pitch
+    (``bogie_pitch_kg``: ``+`` on its leading axle, ``-`` on its trailing one). Without a pivot
+    height the bogie pitch is left to the calibration loop's ``load_transfer`` effect.
     The geometry describes one car (two two-axle bogies ``L`` apart); a vehicle of ``4 c``
     axles is read as a rake of ``c`` such cars of mass ``m / c`` each, every car body pitching
     on its own bogies (coupled coaches: the couplers carry the longitudinal force, not the
@@ -159,12 +162,35 @@ def normal_loads(trace: Trace, decel: np.ndarray) -> np.ndarray:
         dn = (mass / cars) * decel * h / L / 2.0  # per axle of a car's leading / trailing bogie
         sign = np.tile([1.0, 1.0, -1.0, -1.0], cars)
         out += dn[:, None] * sign[None, :]
+        pitch = bogie_pitch_kg(veh, mass / cars)
+        if pitch:
+            out += pitch * decel[:, None] * np.tile([1.0, -1.0], 2 * cars)[None, :]
     elif h and L and n % 2 == 0:
         dn = mass * decel * h / L  # front bogie gains, rear loses; shared by its axles
         half = n // 2
         out[:, :half] += dn[:, None] / half
         out[:, half:] -= dn[:, None] / half
     return np.maximum(out, 0.05 * static)
+
+
+def bogie_pitch_kg(veh: dict[str, Any], car_mass_kg: float) -> float:
+    """Each bogie's pitch from the metadata's geometry, in kg (N of load on its leading axle,
+    off its trailing one, per m/s^2 of deceleration), or 0 without a pivot height and wheelbase.
+
+    Quasi-static moments about a bogie's wheel-rail contacts: the body's share of the braking
+    inertia (half the body's mass) enters at the pivot height ``h_p``, the bogie's own at its
+    centre of gravity ``h_b``; the wheelbase ``w`` turns the moment into a load pair::
+
+        k = ((m_car - 2 m_b) / 2 h_p + m_b h_b) / w
+
+    (``m_b`` = ``bogie_mass_kg``, 0 when not given: the whole car's half then enters at the
+    pivot)."""
+    h_p, w = veh.get("bogie_pivot_height_m"), veh.get("bogie_wheelbase_m")
+    if not (h_p and w):
+        return 0.0
+    m_b = float(veh.get("bogie_mass_kg") or 0.0)
+    h_b = float(veh.get("bogie_cog_height_m") or 0.0)
+    return float(((car_mass_kg - 2.0 * m_b) / 2.0 * h_p + m_b * h_b) / w)
 
 
 def estimate_adhesion(trace: Trace, min_speed_kmh: float = 20.0) -> list[CriticalPoints]:

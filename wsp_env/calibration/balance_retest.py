@@ -15,10 +15,13 @@ from typing import Any
 import numpy as np
 
 from wsp_env.calibration.balance_effects import (
-    fit_lag_at,
+    Shape,
+    fit_lag_in,
     fit_linear,
+    lag_shape,
     lag_signatures,
     params_from,
+    shape_params,
     step_columns,
 )
 from wsp_env.calibration.plausibility import implausible, negligible
@@ -41,17 +44,22 @@ def _balance_base(
 
 
 def fit_lag_at_joint(
-    trace: Trace, result: Result, residual0: np.ndarray, mask: np.ndarray, tau: float
+    trace: Trace, result: Result, residual0: np.ndarray, mask: np.ndarray, shapes: list[Shape]
 ) -> tuple[dict[str, float], np.ndarray]:
-    """The wheels' lag added to the balance effects already in, those refitted with it (a
-    force effect added first absorbed part of the lag: alone on what it left, the lag would
-    only undo that)."""
+    """The wheels' lag (the best of ``shapes``, ``balance_effects.wheel_window``) added to the
+    balance effects already in, those refitted with it (a force effect added first absorbed
+    part of the lag: alone on what it left, the lag would only undo that)."""
     cols = [c for st in result.added if (cc := step_columns(trace, st, residual0)) for c in cc]
+    base = _balance_base(trace, result, residual0, mask)
     if not cols:
-        return fit_lag_at(trace, _balance_base(trace, result, residual0, mask), tau)
-    sig = lag_signatures(trace, [tau])[1][0]
-    _, new = fit_linear(trace, _balance_base(trace, result, residual0, mask) - sig, mask, cols)
-    return {"lag_s": float(tau)}, new
+        return fit_lag_in(trace, base, mask, shapes)
+    best: tuple[float, Shape, np.ndarray] = (math.inf, shapes[0], base)
+    for shape, sig in zip(shapes, lag_signatures(trace, shapes)[1], strict=True):
+        _, new = fit_linear(trace, base - sig, mask, cols)
+        rss = float(np.sum(new[mask] ** 2))
+        if rss < best[0]:
+            best = (rss, shape, new)
+    return shape_params(best[1]), best[2]
 
 
 def retest_balance(
@@ -68,7 +76,7 @@ def retest_balance(
     # a force effect could trade against), and stands on the wheels' evidence
     by_wheels = [st for st in result.added if "wheel_lag_s" in st.confidence]
     for st in by_wheels:
-        fixed = fixed - lag_signatures(trace, [st.parameters["lag_s"]])[1][0]
+        fixed = fixed - lag_signatures(trace, [lag_shape(st.parameters)])[1][0]
     n = int(mask.sum())
     # effects dropped as weak beside another: re-admitted when that one goes for good (a
     # gradient judged weak beside a resistance that then turns out to propel the train)

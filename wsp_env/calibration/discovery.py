@@ -97,20 +97,26 @@ from wsp_env.calibration.adhesion_model import (
 )
 from wsp_env.calibration.balance_effects import (
     CANDIDATES_BALANCE,
+    LAG_FIT_SET,
+    LAG_FITS,
     LAG_GRID_S,
     PAIR_NAMES,
+    TIME_CONSTANT_GRID_S,
     TRAIL_PLAUSIBLE_S,
     fit_lag,
-    fit_lag_at,
+    fit_lag_in,
     fit_lag_with,
     fit_linear,
     fit_sensor_lag,
+    fit_time_constant,
     ground_speed_trail_s,
     lag_beyond_timing,
     pair_terms,
+    shape_params,
     timing_signatures,
     timing_verdict,
     wheel_verdict,
+    wheel_window,
 )
 from wsp_env.calibration.balance_retest import fit_lag_at_joint, retest_balance
 from wsp_env.calibration.coasting_effects import CANDIDATES_COASTING
@@ -138,6 +144,7 @@ from wsp_env.calibration.selection import (
     Result,
     Step,
     bic,
+    separating_measurement,
 )
 from wsp_env.calibration.traces import Trace
 from wsp_env.calibration.wheel_lag import WheelLag, wheel_lag
@@ -177,6 +184,7 @@ class _Loop:
     on_time: str  # why a pressure lag is rejected where the wheels show the brake on time
     used: set[str] = field(default_factory=set)  # category + channel of the effects added
     timing: list[np.ndarray] | None = None  # this round's sub-resolution lags (balance)
+    alternative_fits: list[dict[str, Any]] = field(default_factory=list)  # the last choice's
 
 
 def _label(cand: Any) -> str:
@@ -325,15 +333,20 @@ def _try_single(loop: _Loop, cand: Candidate) -> Qualified | None:
     # the coasting candidates carry their own test (an offset against its
     # standard error, not the RMSE against the per-sample noise)
     own_test = ch == COASTING
-    # a pressure lag the wheels measured carries its own test too (``wheel_lag``)
-    by_wheels = cand.fit is fit_lag and loop.wheel == "late"
+    # a pressure lag the wheels measured carries its own test too (``wheel_lag``), in the
+    # shape they show; the other shapes are not tried beside it
+    late = loop.wheel == "late"
+    assert loop.wheels is not None or not late
+    by_wheels = late and cand.fit is LAG_FITS[loop.wheels.shape]
+    if late and cand.fit in LAG_FIT_SET and not by_wheels:
+        return None
     if rmse0 < QUIET_FACTOR * loop.floors[ch] and not (own_test or by_wheels):
         return None
     quiet = rmse0 < NOISE_FACTOR * loop.floors[ch] and not (own_test or by_wheels)
     if by_wheels:
         assert loop.wheels is not None
         fitted = fit_lag_at_joint(
-            trace, loop.result, loop.chans[ch].residual, mask, loop.wheels.lag_s
+            trace, loop.result, loop.chans[ch].residual, mask, wheel_window(loop.wheels)
         )
     else:
         fitted = cand.fit(trace, res, mask)
@@ -358,6 +371,7 @@ def _try_single(loop: _Loop, cand: Candidate) -> Qualified | None:
     if by_wheels:
         assert loop.wheels is not None
         row["wheel_lag_s"], row["wheel_lag_se_s"] = loop.wheels.lag_s, loop.wheels.se_s
+        row["wheel_lag_shape"] = loop.wheels.shape
         if rmse1 < rmse0 and dbic < -MIN_DELTA_BIC:
             return (gain, cand, params, new, rmse0, rmse1, dbic, k)
         row["rejected"] = "the wheels' lag does not improve the balance"
@@ -368,7 +382,7 @@ def _try_single(loop: _Loop, cand: Candidate) -> Qualified | None:
     if not (dbic < -MIN_DELTA_BIC and (gain >= MIN_REDUCTION or own_test)):
         return None
     if ch == BALANCE:
-        if cand.fit in (fit_lag, fit_sensor_lag):
+        if cand.fit in (*LAG_FIT_SET, fit_sensor_lag):
             reason = lag_beyond_timing(res, mask, _timing(loop), rmse1)
         else:
             st = Step(cand.name, cand.category, ch, params, rmse0, rmse1, dbic)
@@ -395,7 +409,7 @@ def _single_rejected(
     reason = implausible(cand.category, params, trace)
     if not by_wheels:  # the wheels' lag has its own resolution (WHEEL_LAG_MIN_S)
         reason = reason or negligible(cand.category, params, trace)
-    if cand.fit is fit_lag and loop.wheel == "on_time":
+    if cand.fit in LAG_FIT_SET and loop.wheel == "on_time":
         reason = reason or loop.on_time
     if quiet and rmse0 - rmse1 < QUIET_MIN_CUT * floor:
         reason = reason or (
@@ -458,9 +472,10 @@ def _pair_fits(
         single[a] = math.sqrt(float(np.sum(r1[mask] ** 2)) / n)
     if wheel == "late":  # the lag alone is the wheels' lag, not the grid's best
         assert wheels is not None
-        lag_alone = fit_lag_at(trace, res, wheels.lag_s)[1]
+        lag_alone = fit_lag_in(trace, res, mask, wheel_window(wheels))[1]
     else:
-        lag_alone = fit_lag(trace, res, mask)[1]
+        lag_alone = min((f(trace, res, mask)[1] for f in (fit_lag, fit_time_constant)),
+                        key=lambda r: float(np.sum(r[mask] ** 2)))  # fmt: skip
     single["pressure_lag"] = math.sqrt(float(np.sum(lag_alone[mask] ** 2)) / n)
     fits = []  # (a, b, parameters of a, parameters of b, new residual)
     for i, a in enumerate(names if not quiet else ()):
@@ -472,9 +487,13 @@ def _pair_fits(
     # absorbs only in part, so each alone leaves the other's shape behind
     for a in names if wheel != "on_time" else ():
         reg = None if a == "pad_friction" else terms[a][0]
-        taus = [wheels.lag_s] if wheels is not None and wheel == "late" else LAG_GRID_S
-        tau, c, new = fit_lag_with(trace, res, mask, reg, taus)
-        fits.append((a, "pressure_lag", terms[a][1](c), {"lag_s": tau}, new))
+        if wheels is not None and wheel == "late":
+            taus = wheel_window(wheels)
+        else:  # either shape (a dead time or a time constant) beside the force
+            taus = [(float(x), 0.0) for x in LAG_GRID_S]
+            taus += [(0.0, float(x)) for x in TIME_CONSTANT_GRID_S]
+        shape, c, new = fit_lag_with(trace, res, mask, reg, taus)
+        fits.append((a, "pressure_lag", terms[a][1](c), shape_params(shape), new))
     return single, fits
 
 
@@ -571,7 +590,46 @@ def _choose(loop: _Loop, qualified: list[Qualified]) -> tuple[Qualified, list[st
     # candidates the data cannot tell from the chosen one (within the tie margin): named
     alternatives = sorted({_label(q[1]) for q in same if q is not best
                            and q[5] <= best[5] + margin} - {_label(best[1])})  # fmt: skip
+    # each alternative's own best fit (a label may have been fitted in several forms)
+    fits: dict[str, Qualified] = {}
+    for q in same:
+        lab = _label(q[1])
+        if lab in alternatives and q[5] <= best[5] + margin:
+            if lab not in fits or q[5] < fits[lab][5]:
+                fits[lab] = q
+    loop.alternative_fits = [_alternative_fit(fits[lab]) for lab in alternatives]
+    # the same effect in another form inside the margin (a dead time against a first-order
+    # lag): no other category, but the trace does not decide the form either
+    forms = [
+        q
+        for q in same
+        if q is not best
+        and q[5] <= best[5] + margin
+        and _label(q[1]) == _label(best[1])
+        and _name_of(q[1]) != _name_of(best[1])
+    ]
+    for name in dict.fromkeys(_name_of(q[1]) for q in forms):
+        q = min((q for q in forms if _name_of(q[1]) == name), key=lambda q: q[5])
+        loop.alternative_fits.append(_alternative_fit(q))
     return best, alternatives
+
+
+def _alternative_fit(q: Qualified) -> dict[str, Any]:
+    """What an alternative inside the tie margin would have been: its effect (a pair: both,
+    joined by '+'), parameters (a pair: per category), ΔBIC and the channel's RMSE after."""
+    cand, params = q[1], q[2]
+    if isinstance(cand, tuple):
+        params = {c[0]: dict(c[1]) for c in cand}
+    return {"effect": _label(cand), "name": _name_of(cand), "parameters": dict(params or {}),
+            "delta_bic": float(q[6]), "after": float(q[5])}  # fmt: skip
+
+
+def _name_of(cand: Any) -> str:
+    if isinstance(cand, tuple):
+        return " + ".join(PAIR_NAMES[c[0]] for c in cand)
+    if isinstance(cand, str):
+        return EXTENSION_CATEGORY[cand]
+    return cand.name
 
 
 def _add(loop: _Loop, best: Qualified, alternatives: list[str]) -> None:
@@ -587,8 +645,14 @@ def _add(loop: _Loop, best: Qualified, alternatives: list[str]) -> None:
     else:
         assert params is not None
         _add_single(loop, cand, params, new, rmse0, rmse1, dbic)
+    chosen = set(_label(cand).split("+"))
+    fits = loop.alternative_fits
+    runner = min(fits, key=lambda a: a["after"]) if fits else None
     for st in loop.result.added[n_before:]:
         st.alternatives = alternatives
+        if runner is not None:
+            st.alternative_fits = loop.alternative_fits
+            st.separate_by = separating_measurement(chosen, set(runner["effect"].split("+")))
 
 
 def _add_pair(
@@ -604,7 +668,8 @@ def _add_pair(
         st = Step(PAIR_NAMES[category], category, ch, p_fit, before, after, dbic)
         if category == "pressure_lag" and loop.wheel == "late":
             assert loop.wheels is not None
-            st.confidence.update(wheel_lag_s=loop.wheels.lag_s, wheel_lag_se_s=loop.wheels.se_s)
+            st.confidence.update(wheel_lag_s=loop.wheels.lag_s, wheel_lag_se_s=loop.wheels.se_s,
+                                 wheel_lag_shape=loop.wheels.shape)  # fmt: skip
         loop.result.added.append(st)
         before = after
     loop.result.errors_after[ch] = rmse1
@@ -625,9 +690,10 @@ def _add_single(
     loop.residual[cand.channel] = new
     loop.used.add(cand.category + cand.channel)
     step = Step(cand.name, cand.category, cand.channel, params, rmse0, rmse1, dbic)
-    if cand.fit is fit_lag and loop.wheel == "late":
+    if cand.fit in LAG_FIT_SET and loop.wheel == "late":
         assert loop.wheels is not None
-        step.confidence.update(wheel_lag_s=loop.wheels.lag_s, wheel_lag_se_s=loop.wheels.se_s)
+        step.confidence.update(wheel_lag_s=loop.wheels.lag_s, wheel_lag_se_s=loop.wheels.se_s,
+                               wheel_lag_shape=loop.wheels.shape)  # fmt: skip
     result.errors_after[cand.channel] = rmse1
     if cand.category == "sensor" and cand.channel == COASTING:
         # the same scale error acts on the balance channel: correct it there too

@@ -63,6 +63,27 @@ def scenario_options(result: Result) -> dict[str, Any]:
     return opts
 
 
+def ambiguity_comments(result: Result) -> str:
+    """YAML comments recording, for each effect the trace did not decide, the alternatives the
+    options were not built from (comments: ``reset`` reads the options unchanged)."""
+    lines = []
+    for st in result.added:
+        if not st.ambiguous:
+            continue
+        chosen = ", ".join(f"{k} {v:.4g}" for k, v in st.parameters.items())
+        lines.append(f"# ambiguous: built from {st.category} ({chosen}); as well explained by:")
+        for a in st.alternative_fits:
+            flat = {
+                f"{k}.{kk}" if isinstance(v, dict) else k: vv if isinstance(v, dict) else v
+                for k, v in a["parameters"].items()
+                for kk, vv in (v.items() if isinstance(v, dict) else [(k, v)])
+            }
+            params = ", ".join(f"{k} {v:.4g}" for k, v in flat.items())
+            lines.append(f"#   {a['effect']} ({params}; dBIC {a['delta_bic']:.0f})")
+        lines.append(f"#   to separate them: {st.separate_by}")
+    return "".join(line + "\n" for line in lines)
+
+
 def export_config(
     path: str | Path, trace: Trace, result: Result, name: str | None = None
 ) -> tuple[Path, Path]:
@@ -109,7 +130,7 @@ def export_config(
     )
     text = header + yaml.safe_dump(rail, sort_keys=False)
     opts_path = target.with_name(target.name + ".options.yaml")
-    opts_text = yaml.safe_dump(opts, sort_keys=True)
+    opts_text = ambiguity_comments(result) + yaml.safe_dump(opts, sort_keys=True)
     target.parent.mkdir(parents=True, exist_ok=True)
     write_atomically(target, lambda fh: fh.write(text))
     write_atomically(opts_path, lambda fh: fh.write(opts_text))

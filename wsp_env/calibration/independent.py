@@ -37,7 +37,8 @@ when slowing, low-pass filtered with 0.1 s, i.e. quasi-static). ``k_i`` (kg) add
 of mass ``m_c``: body pitch ``+m_c h / L`` shared by the two axles of the car's leading bogie
 (``-`` on the trailing bogie), ``h`` = ``cog_height_m``, ``L`` = ``bogie_centre_distance_m``;
 and bogie pitch ``+m_c h_p / (2 w)`` on the leading axle of each bogie (``-`` on its trailing
-axle), ``h_p`` the bogie pivot height (not in the metadata), ``w`` = ``bogie_wheelbase_m``.
+axle), ``h_p`` the bogie pivot height (in the metadata only with ``pivot_in_metadata``),
+``w`` = ``bogie_wheelbase_m``.
 Static loads: each car's weight is split between its bogies with a small drawn asymmetry
 (``static_front_share``), equally within a bogie; these true static loads are in the metadata.
 
@@ -140,7 +141,8 @@ Metadata
 Only nominal data: format, test_id, sample_period_s, initial_speed_kmh, contaminant,
 brake_type and vehicle {name, mass_kg, n_axles, wheel_radius_m (nominal),
 wheelset_inertia_kgm2, axle_static_load_kN, cog_height_m, bogie_centre_distance_m,
-bogie_wheelbase_m (all three left out when ``geometry_in_metadata`` is False), brake
+bogie_wheelbase_m (all three left out when ``geometry_in_metadata`` is False; with them
+``bogie_pivot_height_m`` where ``pivot_in_metadata``: half of the random scenarios), brake
 {p_threshold_bar, torque_gain_Nm_per_bar, p_max_bar}, resistance {a_N, b_N_per_mps,
 c_N_per_mps2}}. With ``transfer_list_in_metadata`` (default False) it also gives
 ``axle_load_transfer_kN_per_mps2``: the NOMINAL body + bogie pitch transfer per axle. The
@@ -167,6 +169,11 @@ Injected effects (``Effect(category, params)``), exact conventions
   ``force_N * p_demand(t) / p_max`` while the train moves (not in any column).
 - ``pressure_lag``: ``lag_s`` (s); the brake torque follows the logged pressure ``lag_s`` later
   (sensor upstream of the cylinder): ``T(t) = gain max(0, p_logged(t - lag_s) - p_th)``.
+- ``pressure_time_constant`` (calibration category ``pressure_lag``): ``time_constant_s`` (s);
+  the cylinder behind the sensor fills through a restriction: the pressure that makes the
+  torque is the logged one (after any ``pressure_lag`` dead time) through a first-order lag,
+  ``tc dp_eff/dt = p_logged(t - lag_s) - p_eff`` (exact per 10 ms substep for a pressure held
+  over it). Both together are a dead time followed by a first-order lag.
 - ``sensor_scale`` (calibration category ``sensor``): ``scale_error`` (fraction); logged
   ground speed = (1 + s) x true speed.
 - ``sensor_lag`` (calibration category ``sensor``): ``lag_s`` (s); logged ground speed is the
@@ -219,6 +226,7 @@ EFFECT_PARAMS: dict[str, tuple[str, ...]] = {
     "pad_friction": ("scale",),
     "unmeasured_brake_force": ("force_N",),
     "pressure_lag": ("lag_s",),
+    "pressure_time_constant": ("time_constant_s",),
     "sensor_scale": ("scale_error",),
     "sensor_lag": ("lag_s",),
     "load_transfer": ("factor",),
@@ -227,7 +235,8 @@ EFFECT_PARAMS: dict[str, tuple[str, ...]] = {
 }
 
 CALIBRATION_CATEGORY: dict[str, str] = {
-    k: ("sensor" if k.startswith("sensor_") else k) for k in EFFECT_PARAMS
+    k: ("sensor" if k.startswith("sensor_") else "pressure_lag" if k.startswith("pressure_") else k)
+    for k in EFFECT_PARAMS
 }
 
 
@@ -320,6 +329,7 @@ class Scenario:
     include_v_ref: bool = False
     include_wsp_active: bool = False
     geometry_in_metadata: bool = True
+    pivot_in_metadata: bool = False
     transfer_list_in_metadata: bool = False
     record_tail_s: float = 1.0
     max_duration_s: float = 300.0
@@ -467,6 +477,11 @@ def random_scenario(rng: np.random.Generator, **overrides: Any) -> Scenario:
     d["transfer_list_in_metadata"] = bool(pick("transfer_list_in_metadata", False))
     d["record_tail_s"] = float(pick("record_tail_s", 1.0))
     d["max_duration_s"] = float(pick("max_duration_s", 300.0))
+    # from a stream of its own (the scenario's seed), so that the caller's generator moves as
+    # it did before this field existed: of the traces with geometry (75 %), two in three also
+    # give the bogie pivot height (50 % of all)
+    own = np.random.default_rng([int(d["seed"]), 25])
+    d["pivot_in_metadata"] = bool(pick("pivot_in_metadata", bool(own.random() < 2.0 / 3.0)))
     sc = Scenario(**d)
     for lst in ("car_axle_load_t", "static_front_share"):
         if len(getattr(sc, lst)) != sc.n_cars:
@@ -534,6 +549,7 @@ def _resolve_effects(sc: Scenario, effects: Sequence[Effect]) -> dict[str, Any]:
         "pad_scale": 1.0,
         "ub_force": 0.0,
         "pressure_lag": 0.0,
+        "pressure_tc": 0.0,
         "gps_scale_error": 0.0,
         "gps_extra_lag": 0.0,
         "transfer_factor": 1.0,
@@ -556,6 +572,8 @@ def _resolve_effects(sc: Scenario, effects: Sequence[Effect]) -> dict[str, Any]:
             t["ub_force"] += float(p["force_N"])
         elif c == "pressure_lag":
             t["pressure_lag"] += float(p["lag_s"])
+        elif c == "pressure_time_constant":
+            t["pressure_tc"] += float(p["time_constant_s"])
         elif c == "sensor_scale":
             t["gps_scale_error"] = (1 + t["gps_scale_error"]) * (1 + float(p["scale_error"])) - 1
         elif c == "sensor_lag":
@@ -566,7 +584,7 @@ def _resolve_effects(sc: Scenario, effects: Sequence[Effect]) -> dict[str, Any]:
             t["positions"].append((float(p["position_m"]), float(p["factor"])))
         elif c == "adhesion_per_axle":
             t["axle_factor"][int(p["axle"]) - 1] *= float(p["factor"])
-    if t["pressure_lag"] < 0 or t["gps_extra_lag"] < 0:
+    if t["pressure_lag"] < 0 or t["gps_extra_lag"] < 0 or t["pressure_tc"] < 0:
         raise ValueError("lags must be >= 0")
     return t
 
@@ -599,7 +617,8 @@ def random_effect(
     load_transfer, adhesion_per_axle, adhesion_position: the factor itself = magnitude;
     wheel_radius: radius_error +-magnitude (fraction, sign drawn, random axle);
     unmeasured_brake_force: force_N = magnitude (N); pressure_lag, sensor_lag: lag_s =
-    magnitude (s); sensor_scale: scale_error +-magnitude (fraction, sign drawn);
+    magnitude (s); pressure_time_constant: time_constant_s = magnitude (s); sensor_scale:
+    scale_error +-magnitude (fraction, sign drawn);
     adhesion_per_axle: random axle; adhesion_position: position drawn in 15-60 % of the
     estimated braking distance.
     """
@@ -625,6 +644,8 @@ def random_effect(
         params = {"force_N": m}
     elif category in ("pressure_lag", "sensor_lag"):
         params = {"lag_s": m}
+    elif category == "pressure_time_constant":
+        params = {"time_constant_s": m}
     elif category == "sensor_scale":
         params = {"scale_error": sign() * m}
     elif category == "adhesion_per_axle":
@@ -705,6 +726,9 @@ def _simulate(
     lag = tr["pressure_lag"]
     lag_sub = lag / SUB_DT
     p_hist = np.zeros((n_max * N_SUB + 1, n)) if lag > 0 else None
+    tc = tr["pressure_tc"]
+    dec_tc = math.exp(-SUB_DT / tc) if tc > 0 else 0.0
+    p_eff = np.zeros(n)  # the first-order lagged pressure (pressure_time_constant)
 
     # WSP parameters
     ab_a, ab_b = 0.35, 0.04
@@ -861,6 +885,12 @@ def _simulate(
             p_use = p_hist[i0] * (1 - fr) + p_hist[np.minimum(i0 + 1, m_sub + N_SUB)] * fr
         else:
             p_use = p_sub
+        if tc > 0:  # first order behind the dead time, exact for a pressure held per substep
+            filt = np.empty_like(p_use)
+            for j in range(N_SUB):
+                p_eff = p_use[j] + (p_eff - p_use[j]) * dec_tc
+                filt[j] = p_eff
+            p_use = filt
         T_sub = gain * np.maximum(p_use - pth, 0.0)
         p = p_sub[-1]
         m_sub += N_SUB
@@ -1128,6 +1158,8 @@ def _metadata(sc: Scenario, sim: dict[str, Any]) -> dict:
         veh["cog_height_m"] = round(sc.cog_height_m, 3)
         veh["bogie_centre_distance_m"] = round(sc.bogie_centre_distance_m, 3)
         veh["bogie_wheelbase_m"] = round(sc.bogie_wheelbase_m, 3)
+        if sc.pivot_in_metadata:
+            veh["bogie_pivot_height_m"] = round(sc.bogie_pivot_height_m, 3)
         if sc.transfer_list_in_metadata:
             k_nom = _vehicle(sc)["k"]
             veh["axle_load_transfer_kN_per_mps2"] = [round(float(x) / 1000, 3) for x in k_nom]

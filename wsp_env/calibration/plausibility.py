@@ -110,6 +110,9 @@ def implausible(category: str, params: dict[str, float], trace: Trace) -> str | 
             )
     if "lag_s" in params and not 0.0 < params["lag_s"] <= PRESSURE_LAG_MAX_S:
         return f"pressure lag {params['lag_s']:.2f} s outside (0, {PRESSURE_LAG_MAX_S:g}] s"
+    tc = params.get("time_constant_s")
+    if tc is not None and not 0.0 < tc <= PRESSURE_LAG_MAX_S:
+        return f"pressure time constant {tc:.2f} s outside (0, {PRESSURE_LAG_MAX_S:g}] s"
     if category == "running_resistance":
         v = np.linspace(0.0, float(np.nanmax(trace.v_train_kmh)) / 3.6, 20)
         delta = resistance_change_N(params, trace, v)
@@ -169,16 +172,17 @@ def negligible(category: str, params: dict[str, float], trace: Trace) -> str | N
             f"ground-speed scale {100 * params['speed_scale_error']:+.2f} %: inside a sensor's "
             f"{100 * SPEED_SCALE_MIN:g} % calibration tolerance"
         )
-    lags = (("speed_lag_s", "ground-speed lag", trace.v_train_logger_lag_s),
-            ("lag_s", "pressure lag", 0.0))  # fmt: skip
-    for key, what, logger in lags:
-        if key in params and abs(params[key]) - logger < LAG_MIN_S:
+    # a pressure lag's size is its mean delay: the dead time plus the time constant
+    pressure = params.get("lag_s", 0.0) + params.get("time_constant_s", 0.0)
+    lags = (("speed_lag_s", "ground-speed lag", trace.v_train_logger_lag_s,
+             params.get("speed_lag_s")),
+            ("lag_s", "pressure lag", 0.0,
+             pressure if {"lag_s", "time_constant_s"} & set(params) else None))  # fmt: skip
+    for _key, what, logger, value in lags:
+        if value is not None and abs(value) - logger < LAG_MIN_S:
             of_it = (f", {logger:.2f} s of it the logger's averaging of "
                      f"{trace.v_train_update_s:g} s updates" if logger else "")  # fmt: skip
-            return (
-                f"{what} {params[key]:.3f} s{of_it}: inside the logging's {LAG_MIN_S:g} s "
-                "resolution"
-            )
+            return f"{what} {value:.3f} s{of_it}: inside the logging's {LAG_MIN_S:g} s resolution"
     return None
 
 

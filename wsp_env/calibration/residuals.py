@@ -212,3 +212,23 @@ def channels(trace: Trace) -> dict[str, Channel]:
     for ch in (train_speed_balance(trace), adhesion_fit(trace), coasting_creep(trace)):
         out[f"{ch.name}_{ch.unit}"] = ch
     return out
+
+
+def first_order(t: np.ndarray, u: np.ndarray, tc: np.ndarray) -> np.ndarray:
+    """``u`` (samples x columns) through first-order lags ``tc dy/dt = u - y`` (one time constant
+    per column, s; 0 passes the column through), exact for ``u`` linear between samples (the
+    same reading of the log as the balance's trapezoid integral), starting at rest on ``u[0]``.
+    Vectorised over the columns; one pass over the samples."""
+    u = np.asarray(u, dtype=np.float64)
+    tc = np.broadcast_to(np.asarray(tc, dtype=np.float64), u.shape[1:])
+    live = tc > 0.0
+    tcs = np.where(live, tc, 1.0)
+    dt = np.diff(t)
+    a = np.exp(-dt[:, None] / tcs[None, :])  # (samples - 1, columns)
+    slope = np.diff(u, axis=0) / dt[:, None]
+    y = np.empty_like(u)
+    y[0] = u[0]
+    for k in range(1, len(t)):
+        ts = tcs * slope[k - 1]
+        y[k] = u[k] - ts + (y[k - 1] - u[k - 1] + ts) * a[k - 1]
+    return np.where(live[None, :], y, u)

@@ -58,6 +58,18 @@ class Step:
     # other effects that explained the channel as well (within the tie margin): the data alone
     # cannot tell them apart (pads and an unmeasured brake force on a stop without WSP action)
     alternatives: list[str] = field(default_factory=list)
+    # declared ambiguity: the runner-up (an effect or a pair) inside the tie margin; each
+    # alternative's fit (``effect``, ``parameters``, ``delta_bic``, ``after``) and, in one line,
+    # the measurement that would separate them (``separating_measurement``)
+    alternative_fits: list[dict[str, Any]] = field(default_factory=list)
+    separate_by: str = ""
+
+    @property
+    def ambiguous(self) -> bool:
+        """The trace does not decide between this effect and its ``alternatives`` (other
+        categories) or another form of it (``alternative_fits`` also lists those: a dead time
+        against a time constant)."""
+        return bool(self.alternatives or self.alternative_fits)
 
     def as_dict(self) -> dict[str, Any]:
         return {
@@ -70,7 +82,87 @@ class Step:
             "delta_bic": self.delta_bic,
             "confidence": self.confidence,
             "alternatives": self.alternatives,
+            "ambiguous": self.ambiguous,
+            "alternative_fits": self.alternative_fits,
+            "separate_by": self.separate_by,
         }
+
+
+# What separates two effects that explained a trace equally well: keyed by the pair of
+# categories (either order); ``separating_measurement`` picks the line for the chosen effect
+# and the runner-up. The physics of each line: where the two
+# signatures differ (a force in proportion to the cylinders' vs to the demand; a constant force
+# vs one growing with speed; a force present with the brake off vs one that needs it; a late
+# brake vs a late ground speed).
+SEPARATING: list[tuple[frozenset[str], str]] = [
+    (
+        frozenset({"pad_friction", "unmeasured_brake_force"}),
+        "a stop on which the WSP vents (cylinders modulated against a steady demand), or one at a "
+        "lower demand: pads scale the cylinders' force, an unmeasured brake follows the demand",
+    ),
+    (
+        frozenset({"gradient", "running_resistance"}),
+        "a coasting run over the same track at another speed, or the stop in the other direction: "
+        "a gradient is constant and changes sign with direction, a resistance grows with speed",
+    ),
+    (
+        frozenset({"gradient", "unmeasured_brake_force"}),
+        "a coasting segment with the brake released: a gradient acts without the brake, an "
+        "unmeasured brake force does not",
+    ),
+    (
+        frozenset({"gradient", "pad_friction"}),
+        "a coasting segment with the brake released, or a stop at a lower demand: a gradient acts "
+        "without the brake, pads only with it",
+    ),
+    (
+        frozenset({"running_resistance", "unmeasured_brake_force"}),
+        "a coasting run from the same speed with the brake released: resistance acts without the "
+        "brake, an unmeasured brake force does not",
+    ),
+    (
+        frozenset({"running_resistance", "pad_friction"}),
+        "a coasting run from the same speed with the brake released: resistance acts without the "
+        "brake, pads only with it",
+    ),
+    (
+        frozenset({"pressure_lag", "sensor"}),
+        "the ground speed against a wheel left unbraked (or the receiver's latency from its data "
+        "sheet): a late ground speed trails a rolling wheel, a late brake does not",
+    ),
+    (
+        frozenset({"pressure_lag"}),
+        "a step in the brake demand held for some seconds, logged at 50 Hz or faster: a dead time "
+        "shifts the cylinder's answer, a first-order lag rounds it",
+    ),
+    (
+        frozenset({"adhesion_per_axle", "load_transfer"}),
+        "a stop at a different deceleration: a load transfer changes with it, an axle's own "
+        "friction does not",
+    ),
+    (
+        frozenset({"adhesion_position", "adhesion_per_axle"}),
+        "a second stop over the same rail from another starting point: a change on the rail stays "
+        "at its place, an axle's factor moves with the train",
+    ),
+]
+SEPARATING_DEFAULT = (
+    "a stop with another speed profile or brake demand: the candidates' signatures differ "
+    "where the demand, the speed or the WSP's action change"
+)
+
+
+def separating_measurement(chosen: set[str], runner_up: set[str]) -> str:
+    """One line naming the measurement that would separate the chosen effect's categories from
+    the runner-up's (the alternative that came nearest; ``SEPARATING``): the first key with a
+    category of each (one category: the same effect in two shapes)."""
+    both = chosen | runner_up
+    for key, line in SEPARATING:
+        if len(key) == 1 and key == both:
+            return line
+        if len(key) > 1 and key <= both and key & chosen and key & runner_up:
+            return line
+    return SEPARATING_DEFAULT
 
 
 @dataclass

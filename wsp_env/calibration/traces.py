@@ -194,6 +194,7 @@ def _read_meta(csv_path: Path) -> tuple[Path, dict[str, Any]]:
             or not all(isinstance(x, int | float) and math.isfinite(x) for x in per_axle)
         ):
             raise _fail(meta_path, f"vehicle.{key}: must list one number per axle")
+    _check_geometry(meta_path, veh)
     brake = veh.get("brake", {})
     gains = brake.get("axle_torque_gain_Nm_per_bar") if isinstance(brake, dict) else None
     if gains is not None and (
@@ -206,6 +207,44 @@ def _read_meta(csv_path: Path) -> tuple[Path, dict[str, Any]]:
             "number per axle"
         )  # fmt: skip
     return meta_path, meta
+
+
+# Optional vehicle geometry (one car; ``docs/trace_format.md``): name -> (low, high) bounds,
+# each the range of a railway vehicle that has one (a value outside is a typo or a unit error)
+GEOMETRY_BOUNDS: dict[str, tuple[float, float]] = {
+    "cog_height_m": (0.3, 4.0),  # body centre of gravity above the rail
+    "bogie_centre_distance_m": (2.0, 40.0),
+    "bogie_wheelbase_m": (1.0, 5.0),
+    "bogie_pivot_height_m": (0.1, 2.0),  # where the body's braking force enters the bogie
+    "bogie_cog_height_m": (0.2, 1.5),  # bogie frame and wheelsets
+    "bogie_mass_kg": (500.0, 30000.0),
+}
+
+
+def _check_geometry(meta_path: Path, veh: dict[str, Any]) -> None:
+    """One line for the first optional geometry field that is not a number within its bounds,
+    or that contradicts another (a bogie longer than the distance between bogies, bogies
+    heavier than their car, a bogie's centre of gravity without its mass)."""
+    for key, (low, high) in GEOMETRY_BOUNDS.items():
+        value = veh.get(key)
+        if value is None:
+            continue
+        number = isinstance(value, int | float) and not isinstance(value, bool)
+        if not number or not low <= value <= high:
+            raise _fail(meta_path, f"vehicle.{key}: must be a number in [{low:g}, {high:g}], "
+                        f"got {value!r}")  # fmt: skip
+    wb, dist = veh.get("bogie_wheelbase_m"), veh.get("bogie_centre_distance_m")
+    if wb is not None and dist is not None and wb >= dist:
+        raise _fail(meta_path, f"vehicle.bogie_wheelbase_m: {wb:g} m is not shorter than "
+                    f"bogie_centre_distance_m {dist:g} m")  # fmt: skip
+    mb = veh.get("bogie_mass_kg")
+    n = int(veh["n_axles"])
+    if mb is not None and n % 2 == 0 and mb * (n // 2) >= veh["mass_kg"]:
+        raise _fail(meta_path, f"vehicle.bogie_mass_kg: {n // 2} bogies of {mb:g} kg weigh as "
+                    f"much as the vehicle ({veh['mass_kg']:g} kg)")  # fmt: skip
+    if (veh.get("bogie_cog_height_m") is None) != (mb is None):
+        raise _fail(meta_path, "vehicle.bogie_cog_height_m and bogie_mass_kg: give both or "
+                    "neither (the bogie's own pitch needs its mass and its height)")  # fmt: skip
 
 
 def _read_csv(path: Path) -> tuple[list[str], list[list[str]]]:

@@ -53,9 +53,18 @@ def print_calibrate(result: dict[str, Any]) -> None:
     for e in result["added_effects"]:
         params = ", ".join(f"{k} {v:.4g}" for k, v in e["parameters"].items())
         change = f"{e['before']:.3f} -> {e['after']:.3f}"
-        alt = e.get("alternatives") or []
-        also = f"; as well explained by {', '.join(alt)}" if alt else ""
-        print(f"  added {e['category']} on {e['channel']}: {change} ({params}{also})")
+        print(f"  added {e['category']} on {e['channel']}: {change} ({params})")
+        if e.get("ambiguous"):
+            print("    ambiguous: the trace does not decide; as well explained by")
+            for a in e.get("alternative_fits") or []:
+                ap = "; ".join(
+                    f"{k} {v:.4g}" if not isinstance(v, dict)
+                    else f"{k}: " + ", ".join(f"{kk} {vv:.4g}" for kk, vv in v.items())
+                    for k, v in a["parameters"].items()
+                )
+                print(f"      {a['effect']} ({ap}; dBIC {a['delta_bic']:.0f}, "
+                      f"{a['after']:.3f} left)")  # fmt: skip
+            print(f"    to separate them: {e['separate_by']}")
     for d in result.get("dropped_effects", []):
         print(f"  dropped {d['category']}: {d['reason']}")
     for name, h in result.get("channels", {}).items():
