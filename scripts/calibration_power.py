@@ -61,7 +61,10 @@ GRID: dict[str, tuple[list[float], float]] = {
     "sensor_scale": ([0.0075, 0.015, 0.03], 0.015),  # fraction
     "sensor_lag": ([0.1, 0.2, 0.4], 0.2),  # s
     "load_transfer": ([1.5, 2.0, 3.0], 2.0),  # factor
-    "adhesion_position": ([0.15, 0.30, 0.50], 0.30),  # fractional change of mu
+    "adhesion_position": ([0.15, 0.30, 0.50], 0.50),  # fractional change of mu (+-)
+    # the rail gets better part-way (a factor >= 1.5: the wheels stop sliding there), at a
+    # random position; what remains to see is the censored evidence
+    "rail_gets_better": ([1.5, 2.0, 3.0], 2.0),  # factor on mu beyond the change
 }
 PAIRS = [
     (("pad_friction", 0.15), ("pressure_lag", 0.3)),
@@ -72,7 +75,8 @@ PAIRS = [
 ]
 # the loop's category for each generator category, and the parameter compared
 LOOP_CATEGORY = {"sensor_scale": "sensor", "sensor_lag": "sensor",
-                 "pressure_time_constant": "pressure_lag"}  # fmt: skip
+                 "pressure_time_constant": "pressure_lag",
+                 "rail_gets_better": "adhesion_position"}  # fmt: skip
 # a lag is found in its shape: the parameter the loop's pressure lag must carry
 SHAPE_KEY = {"pressure_lag": "lag_s", "pressure_time_constant": "time_constant_s",
              "sensor_scale": "speed_scale_error", "sensor_lag": "speed_lag_s"}  # fmt: skip
@@ -81,7 +85,8 @@ SHAPE_KEY = {"pressure_lag": "lag_s", "pressure_time_constant": "time_constant_s
 # unobservable by any method. Their scenarios draw a low-adhesion contaminant (the generator's
 # soap / leaves / oil, in its own proportions), from a generator of their own so that every
 # other draw of the scenario is unchanged.
-ADHESION_CATEGORIES = ("load_transfer", "adhesion_position", "adhesion_per_axle")
+ADHESION_CATEGORIES = ("load_transfer", "adhesion_position", "adhesion_per_axle",
+                       "rail_gets_better")  # fmt: skip
 SLIDING_RAILS = (("soap", "leaves", "oil"), (0.45 / 0.7, 0.15 / 0.7, 0.1 / 0.7))
 # a friction change is observable where some axle is past the friction curve's peak for this
 # long on each side of it (generator truth); the loop has evidence there with this many of its
@@ -90,6 +95,18 @@ OBSERVABLE_S = 1.0
 OBSERVABLE_POINTS = 3
 SLIDE_POINT_KMH = 1.0
 TARGETS = {"false_positive_max": 0.02, "detection_min": 0.90, "pairs_min": 0.80}
+# targets other than detection_min at the target magnitude (issue 25): a friction change along
+# the rail at +-50 %, 60 %; load transfer x2 at 80 % on the traces that give the geometry; the
+# unmeasured brake force (the choice against pads is declared ambiguous, not forced): 90 % in
+# the named set (chosen or an alternative inside the tie margin)
+CATEGORY_TARGETS = {"adhesion_position": ("detection_rate", 0.60),
+                    "load_transfer": ("with_geometry_rate", 0.80),
+                    "unmeasured_brake_force": ("found_or_named_rate", 0.90)}  # fmt: skip
+
+
+def target_of(cat: str) -> tuple[str, float]:
+    """(the row's rate judged, the rate needed) at the category's target magnitude."""
+    return CATEGORY_TARGETS.get(cat, ("detection_rate", TARGETS["detection_min"]))
 
 
 def sliding_rail(seed: int) -> str:
@@ -142,6 +159,8 @@ def scaled_effect(
     if category in ("pad_friction", "adhesion_position"):
         sign = 1.0 if rng.random() < 0.5 else -1.0
         return ind.random_effect(category, 1.0 + sign * magnitude, rng, sc)
+    if category == "rail_gets_better":  # the generator's friction change, upwards only
+        return ind.random_effect("adhesion_position", magnitude, rng, sc)
     return ind.random_effect(category, magnitude, rng, sc)
 
 
@@ -180,6 +199,10 @@ def _run_one(job: dict[str, Any]) -> dict[str, Any]:
             other_form = any(key in a.get("parameters", {}) for s in hits
                              for a in s.get("alternative_fits", []))  # fmt: skip
             hits = [s for s in hits if key in s["parameters"]]
+        if eff.category == "adhesion_position":  # a change found the wrong way is no finding
+            up = eff.params["factor"] > 1.0
+            hits = [s for s in hits
+                    if (s["parameters"].get("factor_beyond_step", 1.0) > 1.0) == up]  # fmt: skip
         # a choice made inside the tie margin: the effect found while another explains as
         # well, or another chosen while this one is named among its equally good alternatives
         # (the trace could not tell them apart: "named", reported beside the detection rate,
@@ -328,6 +351,8 @@ def summarise(results: list[dict[str, Any]]) -> dict[str, Any]:
                 "category_rate": float(np.mean([e.get("category_found", e["found"])
                                                 for e in eff])),
                 "geometry": _by_geometry(rs),
+                "with_geometry_rate": _by_geometry(rs).get("with", {}).get("detection_rate",
+                                                                              math.nan),
                 "tied_rate": float(np.mean([bool(e.get("tied_with")) for e in eff])),
                 "tied": int(sum(bool(e.get("tied_with")) for e in eff)),
                 "tied_won": int(sum(bool(e.get("tied_with")) and e["found"] for e in eff)),
@@ -350,11 +375,13 @@ def summarise(results: list[dict[str, Any]]) -> dict[str, Any]:
         detected = [row["magnitude"] for row in rows if row["detection_rate"] >= 0.9]
         target = GRID[cat][1]
         at_target = [row for row in rows if row["magnitude"] == target]
+        rate_key, needed = target_of(cat)
         out["categories"][cat] = {
             "rows": rows,
             "smallest_90pct": min(detected) if detected else None,
             "target_magnitude": target,
-            "target_met": bool(at_target and at_target[0]["detection_rate"] >= 0.9),
+            "target_met": bool(at_target and at_target[0].get(rate_key, math.nan) >= needed),
+            "target_rate": [rate_key, needed],
         }
     pairs = [r for r in ok if r["kind"] == "pair"]
     for pi in sorted({r["pair"] for r in pairs}):
@@ -532,11 +559,23 @@ UNITS = {
 }
 
 
+def _met_text(cat: str, info: dict[str, Any]) -> str:
+    """'yes' / 'no', naming the rate judged where it is not the detection at 90 %."""
+    key, needed = info.get("target_rate", target_of(cat))
+    words = {"detection_rate": "detected", "with_geometry_rate": "detected with geometry",
+             "found_or_named_rate": "in the named set"}  # fmt: skip
+    verdict = "yes" if info["target_met"] else "no"
+    if (key, needed) == ("detection_rate", TARGETS["detection_min"]):
+        return verdict
+    return f"{verdict} ({words[key]} >= {100 * needed:.0f} %)"
+
+
 def markdown_table(summary: dict[str, Any]) -> str:
     """The study as Markdown: per category at its target magnitude, then pairs and clean traces."""
     target = TARGETS["detection_min"]
     lines = [
-        f"Per category at its target magnitude (detection target {100 * target:.0f} %); *or alt*: "
+        f"Per category at its target magnitude (detection target {100 * target:.0f} % unless "
+        "*met* says otherwise); *or alt*: "
         "chosen, or named among the chosen effect's equally good `alternatives` (never counted "
         "as detected); *alone*: detected and not declared ambiguous (no alternative inside the "
         "tie margin); *extra*: traces where another effect was added as well. A pressure lag is "
@@ -560,7 +599,7 @@ def markdown_table(summary: dict[str, Any]) -> str:
             f"{100 * r.get('alone_rate', math.nan):.0f} % | "
             f"{'—' if smallest is None else f'{smallest:g}'} | {err_text} | "
             f"{100 * r['extra_effect_rate']:.0f} % | "
-            f"{'yes' if r['detection_rate'] >= target else 'no'} |"
+            f"{_met_text(cat, info)} |"
         )
     if summary["pairs"]:
         lines += ["", f"Pairs, both found (target {100 * TARGETS['pairs_min']:.0f} %):", ""]

@@ -26,6 +26,7 @@ traces read with the right sign: the best such a reading could do.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import multiprocessing
 import os
 import sys
@@ -36,51 +37,12 @@ from typing import Any
 
 import numpy as np
 
-from wsp_env.calibration.traces import Trace
+from wsp_env.calibration.friction_change import step_reading
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import calibration_power as cp
 
-STEP_GRID = 60
-MIN_SIDE = 6
-MIN_POINTS = 12
 CLEAN_SEED_OFFSET = 900_000  # clean sliding-rail traces: seed * 1e6 + this + k
-
-
-def step_reading(trace: Trace) -> dict[str, float] | None:
-    """The best step in ``log mu`` at the trace's slide points (module docstring), or None
-    where there are fewer than ``MIN_POINTS`` or no position leaves ``MIN_SIDE`` a side."""
-    from wsp_env.calibration.adhesion_estimate import pooled_points
-    from wsp_env.calibration.adhesion_model import axle_offsets_m
-    from wsp_env.calibration.residuals import MIN_SPEED_KMH
-
-    pts = pooled_points(trace, MIN_SPEED_KMH)
-    at_slide = (pts.sliding_kmh >= cp.SLIDE_POINT_KMH) & (pts.mu > 0.0)
-    if at_slide.sum() < MIN_POINTS:
-        return None
-    axle = pts.axle[at_slide]
-    rail_m = (pts.position_m - axle_offsets_m(trace)[pts.axle])[at_slide]
-    speed = trace.v_train_kmh[pts.sample][at_slide] / 100.0
-    y = np.log(pts.mu[at_slide])
-    base = np.column_stack([(axle == a).astype(float) for a in np.unique(axle)] + [speed])
-    best = None
-    for x_s in np.unique(np.quantile(rail_m, np.linspace(0.05, 0.95, STEP_GRID))):
-        beyond = (rail_m >= x_s).astype(float)
-        if beyond.sum() < MIN_SIDE or (1.0 - beyond).sum() < MIN_SIDE:
-            continue
-        design = np.column_stack([base, beyond])
-        coef, *_ = np.linalg.lstsq(design, y, rcond=None)
-        e = y - design @ coef
-        rss = float(e @ e)
-        if best is None or rss < best[0]:
-            dof = max(len(y) - design.shape[1], 1)
-            se = float(np.sqrt(np.linalg.pinv(design.T @ design)[-1, -1] * rss / dof))
-            best = (rss, float(x_s), float(coef[-1]), se)
-    if best is None:
-        return None
-    _, x_s, c, se = best
-    return {"points": int(at_slide.sum()), "position_m": x_s, "factor": float(np.exp(c)),
-            "z": c / se if se > 0 else 0.0}  # fmt: skip
 
 
 def run_job(job: dict[str, Any]) -> dict[str, Any]:
@@ -96,7 +58,8 @@ def run_job(job: dict[str, Any]) -> dict[str, Any]:
     columns, meta = ind.generate(scenario, effects, seed=job["seed"])
     with tempfile.TemporaryDirectory() as tmp:
         csv_path, _ = ind.write_trace(Path(tmp) / "t", columns, meta)
-        reading = step_reading(read_trace(csv_path))
+        found = step_reading(read_trace(csv_path))
+        reading = None if found is None else dataclasses.asdict(found)
     truth = effects[0].params["factor"] if effects else None
     return {**job, "rail": rail, "reading": reading, "true_factor": truth}
 

@@ -68,7 +68,10 @@ def test_a_first_order_lag_is_found_as_one_and_explains_the_balance(tmp_path, se
     (taken at the value the wheels read for it, short of the filter's mean delay) cut the
     balance by about a third. The loop now fits the time constant in the shape the wheels show;
     the balance alone cannot tell the two shapes (it integrates the force: either explains it
-    as well as the other, within 3 %), so the cut is the best either shape gives."""
+    as well as the other, within 3 %). The constant is set on the balance within twice the
+    wheels' reading (``balance_effects.WHEEL_WINDOW``), which keeps the ground speed's own lag
+    out of it at some cost to the cut (seed 5: the wheels read 0.19 s, the balance's free best
+    is 0.40 s, the window's 0.36 s leaves 1.4 times its error)."""
     trace, _, _ = independent_trace(tmp_path, seed, [("pressure_time_constant", 0.3)])
     result = discover(trace)
     lags = [s for s in result.added if s.category == "pressure_lag"]
@@ -82,7 +85,7 @@ def test_a_first_order_lag_is_found_as_one_and_explains_the_balance(tmp_path, se
         float(np.sqrt(np.mean(f(trace, ch.residual, ch.mask)[1][ch.mask] ** 2)))
         for f in (fit_lag, fit_time_constant)
     )
-    assert lag.after <= 1.03 * free
+    assert lag.after <= 1.5 * free
     assert 1.0 - lag.after / lag.before > 0.6
 
 

@@ -113,9 +113,10 @@ def _null_script():
 
 
 def test_a_simple_step_reading_finds_a_friction_change_on_a_power_study_trace():
-    """``friction_step_null.step_reading`` on power-study trace 101011 (soap, 4 axles, the rail
-    x1.3 from 133 m after the brake application): a step up by more than 20 % at |z| > 3,
-    within 60 m of the change (placed from the record's start: the coasting lead-in added)."""
+    """``friction_change.step_reading`` (through ``friction_step_null``) on trace 101011
+    (soap, 4 axles, the rail x1.3 from 133 m after the brake application): a step up by more
+    than 20 % at |z| > 3, within 60 m of the change (placed from the record's start: the
+    coasting lead-in added)."""
     from scipy.integrate import cumulative_trapezoid
 
     from wsp_env.calibration import independent as ind

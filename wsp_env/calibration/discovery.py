@@ -101,7 +101,6 @@ from wsp_env.calibration.balance_effects import (
     LAG_FITS,
     LAG_GRID_S,
     PAIR_NAMES,
-    TIME_CONSTANT_GRID_S,
     TRAIL_PLAUSIBLE_S,
     fit_lag,
     fit_lag_in,
@@ -120,6 +119,7 @@ from wsp_env.calibration.balance_effects import (
 )
 from wsp_env.calibration.balance_retest import fit_lag_at_joint, retest_balance
 from wsp_env.calibration.coasting_effects import CANDIDATES_COASTING
+from wsp_env.calibration.friction_change import friction_change_step
 from wsp_env.calibration.plausibility import (
     SPEED_LAG_MAX_S,
     cancelling_forces,
@@ -255,6 +255,11 @@ def _discover(trace: Trace) -> Result:
             break
         best, alternatives = _choose(loop, qualified)
         _add(loop, best, alternatives)
+    # a friction change the adhesion model did not take, read plainly from the slide points
+    if not any(st.category == "adhesion_position" for st in loop.result.added):
+        change = friction_change_step(trace)
+        if change is not None:
+            loop.result.added.append(change)
     _finish(loop)
     return loop.result
 
@@ -487,11 +492,9 @@ def _pair_fits(
     # absorbs only in part, so each alone leaves the other's shape behind
     for a in names if wheel != "on_time" else ():
         reg = None if a == "pad_friction" else terms[a][0]
-        if wheels is not None and wheel == "late":
-            taus = wheel_window(wheels)
-        else:  # either shape (a dead time or a time constant) beside the force
-            taus = [(float(x), 0.0) for x in LAG_GRID_S]
-            taus += [(0.0, float(x)) for x in TIME_CONSTANT_GRID_S]
+        # the wheels' shape where they measured one; else a dead time (the balance integrates
+        # the force and cannot tell it from a first-order lag of the same mean delay)
+        taus = wheel_window(wheels) if wheels is not None and wheel == "late" else LAG_GRID_S
         shape, c, new = fit_lag_with(trace, res, mask, reg, taus)
         fits.append((a, "pressure_lag", terms[a][1](c), shape_params(shape), new))
     return single, fits
@@ -587,6 +590,13 @@ def _choose(loop: _Loop, qualified: list[Qualified]) -> tuple[Qualified, list[st
     best_after = min(q[5] for q in same)
     tie = _lag_verdict(loop.trace, [q for q in same if q[5] <= best_after + margin])
     best = min(tie, key=lambda q: (q[7], q[5]))
+    # a first-order lag the balance alone preferred, a dead time inside the margin: the
+    # balance cannot tell the two (the same mean delay integrates alike), and without the
+    # wheels' word the dead time stands, the time constant named as the other form
+    if not isinstance(best[1], tuple | str) and best[1].fit is fit_time_constant:
+        dead = [q for q in tie if not isinstance(q[1], tuple | str) and q[1].fit is fit_lag]
+        if dead:
+            best = min(dead, key=lambda q: q[5])
     # candidates the data cannot tell from the chosen one (within the tie margin): named
     alternatives = sorted({_label(q[1]) for q in same if q is not best
                            and q[5] <= best[5] + margin} - {_label(best[1])})  # fmt: skip
