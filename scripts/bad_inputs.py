@@ -129,6 +129,14 @@ def _traces(d: Path) -> None:
     spoil("jump", [",".join(r) for r in rows])
     spoil("fields", [lines[0], *(r + ",1" for r in lines[1:])])
     spoil("huge_field", [lines[0], "1," + "9" * 200_000, *lines[2:]])
+    import json
+
+    m = json.loads(meta)
+    m["vehicle"]["bogie_pivot_height_m"] = 650  # optional geometry in mm
+    spoil("pivot_mm", lines, json.dumps(m))
+    m = json.loads(meta)
+    m["vehicle"]["bogie_cog_height_m"] = 0.5  # a bogie height without its mass
+    spoil("bogie_no_mass", lines, json.dumps(m))
 
 
 def _env(**kwargs: Any) -> Any:
@@ -275,6 +283,8 @@ def cases() -> list[Case]:
         "/proc/nope/r.yaml")  # fmt: skip
     cli(k, "report over a folder of other files", "--report", "good.csv", "--report",
         "not_a_report")  # fmt: skip
+    cli(k, "a pivot height in millimetres", "bogie_pivot_height_m", "pivot_mm.csv")
+    cli(k, "a bogie height without its mass", "bogie_mass_kg", "bogie_no_mass.csv")
 
     b = "bench"
     cli(b, "zero repeats", "--repeats", "--repeats", "0")

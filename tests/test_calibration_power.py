@@ -113,7 +113,7 @@ def _null_script():
 
 
 def test_a_simple_step_reading_finds_a_friction_change_on_a_power_study_trace():
-    """``friction_change.step_reading`` (through ``friction_step_null``) on trace 101011
+    """``friction_step_null.step_reading`` on trace 101011
     (soap, 4 axles, the rail x1.3 from 133 m after the brake application): a step up by more
     than 20 % at |z| > 3, within 60 m of the change (placed from the record's start: the
     coasting lead-in added)."""

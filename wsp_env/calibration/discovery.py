@@ -119,7 +119,6 @@ from wsp_env.calibration.balance_effects import (
 )
 from wsp_env.calibration.balance_retest import fit_lag_at_joint, retest_balance
 from wsp_env.calibration.coasting_effects import CANDIDATES_COASTING
-from wsp_env.calibration.friction_change import friction_change_step
 from wsp_env.calibration.plausibility import (
     SPEED_LAG_MAX_S,
     cancelling_forces,
@@ -255,11 +254,6 @@ def _discover(trace: Trace) -> Result:
             break
         best, alternatives = _choose(loop, qualified)
         _add(loop, best, alternatives)
-    # a friction change the adhesion model did not take, read plainly from the slide points
-    if not any(st.category == "adhesion_position" for st in loop.result.added):
-        change = friction_change_step(trace)
-        if change is not None:
-            loop.result.added.append(change)
     _finish(loop)
     return loop.result
 
