@@ -66,6 +66,19 @@ GRID: dict[str, tuple[list[float], float]] = {
     # random position; what remains to see is the censored evidence
     "rail_gets_better": ([1.5, 2.0, 3.0], 2.0),  # factor on mu beyond the change
 }
+# each category's seeds come from its place in this list (``seed_index``), not in ``GRID``: a
+# row added later goes at its end and leaves every other row's traces as they were
+SEED_ORDER = ["gradient", "wheel_radius", "pad_friction", "unmeasured_brake_force",
+              "running_resistance", "pressure_lag", "sensor_scale", "sensor_lag",
+              "load_transfer", "adhesion_position", "rail_gets_better",
+              "pressure_time_constant"]  # fmt: skip
+
+
+def seed_index(category: str) -> int:
+    """The category's place in ``SEED_ORDER`` (its traces' seeds)."""
+    return SEED_ORDER.index(category)
+
+
 PAIRS = [
     (("pad_friction", 0.15), ("pressure_lag", 0.3)),
     (("gradient", 6.0), ("wheel_radius", 0.012)),
@@ -287,7 +300,7 @@ def _jobs(args: argparse.Namespace) -> list[dict[str, Any]]:
     for k in range(args.clean):
         jobs.append({"kind": "clean", "effects": [], "seed": seed + k})
     for cat in cats:
-        ci = list(GRID).index(cat)  # a subset draws the full study's seeds
+        ci = seed_index(cat)  # a subset draws the full study's seeds
         for mi, mag in enumerate(GRID[cat][0]):
             for k in range(args.scenarios):
                 s = seed + 10_000 * (ci + 1) + 1000 * mi + k
@@ -556,6 +569,7 @@ UNITS = {
     "sensor_lag": "s",
     "load_transfer": "factor",
     "adhesion_position": "fraction of mu",
+    "rail_gets_better": "factor on mu",
 }
 
 

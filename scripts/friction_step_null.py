@@ -169,7 +169,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.magnitude not in mags:
         print(f"--magnitude: one of the power study's {mags}", file=sys.stderr)
         return 2
-    ci = list(cp.GRID).index("adhesion_position")
+    ci = cp.seed_index("adhesion_position")
     base = args.seed * 1_000_000
     jobs = [{"kind": "clean", "effects": [], "seed": base + CLEAN_SEED_OFFSET + k}
             for k in range(args.clean)]  # fmt: skip

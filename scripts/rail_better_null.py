@@ -82,7 +82,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--jobs", type=int, default=2)
     args = ap.parse_args(argv)
     base = args.seed * 1_000_000
-    ci = list(cp.GRID).index("rail_gets_better")
+    ci = cp.seed_index("rail_gets_better")
     jobs = [{"kind": "clean", "effects": [], "seed": base + CLEAN_SEED_OFFSET + k}
             for k in range(args.clean)]  # fmt: skip
     for mi, mag in enumerate(cp.GRID["rail_gets_better"][0]):  # the power study's seeds
