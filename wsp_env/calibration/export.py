@@ -73,11 +73,12 @@ def ambiguity_comments(result: Result) -> str:
         chosen = ", ".join(f"{k} {v:.4g}" for k, v in st.parameters.items())
         lines.append(f"# ambiguous: built from {st.category} ({chosen}); as well explained by:")
         for a in st.alternative_fits:
-            flat = {
-                f"{k}.{kk}" if isinstance(v, dict) else k: vv if isinstance(v, dict) else v
-                for k, v in a["parameters"].items()
-                for kk, vv in (v.items() if isinstance(v, dict) else [(k, v)])
-            }
+            flat: dict[str, float] = {}
+            for k, v in a["parameters"].items():  # a pair's: per category
+                if isinstance(v, dict):
+                    flat.update({f"{k}.{kk}": vv for kk, vv in v.items()})
+                else:
+                    flat[k] = v
             params = ", ".join(f"{k} {v:.4g}" for k, v in flat.items())
             lines.append(f"#   {a['effect']} ({params}; dBIC {a['delta_bic']:.0f})")
         lines.append(f"#   to separate them: {st.separate_by}")

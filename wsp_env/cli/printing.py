@@ -58,7 +58,8 @@ def print_calibrate(result: dict[str, Any]) -> None:
             print("    ambiguous: the trace does not decide; as well explained by")
             for a in e.get("alternative_fits") or []:
                 ap = "; ".join(
-                    f"{k} {v:.4g}" if not isinstance(v, dict)
+                    f"{k} {v:.4g}"
+                    if not isinstance(v, dict)
                     else f"{k}: " + ", ".join(f"{kk} {vv:.4g}" for kk, vv in v.items())
                     for k, v in a["parameters"].items()
                 )
