@@ -9,9 +9,13 @@ belongs to the new episode and the last one goes to ``infos[i]["terminal_observa
 At an episode's end ``infos[i]["episode"]`` carries ``{"r", "l", "t"}`` as ``VecMonitor`` writes
 it (the undiscounted return of the environment's own reward, before any ``VecNormalize``; the
 length in steps; seconds since the adapter was made), so SB3 logs episode statistics without a
-``VecMonitor``. ``seed()`` and ``set_options()`` (SB3's ``VecEnv`` API: one seed for all, or
-per-environment options) take effect at the next ``reset()``. With ``render_mode="rgb_array"``
-``get_images()`` gives every environment's frame (so SB3's ``render()`` tiles them).
+``VecMonitor``. Both count the steps since ``reset`` returned, as ``VecMonitor`` sees them: with
+the vector env's ``stagger_reset_steps`` the first episode of each environment leaves out the
+warm-up that ``reset`` drove into its stop (``r`` is then the stop's return less the warm-up's;
+``info``'s ``metrics`` still describe the whole stop). ``seed()`` and ``set_options()`` (SB3's
+``VecEnv`` API: one seed for all, or per-environment options) take effect at the next
+``reset()``. With ``render_mode="rgb_array"`` ``get_images()`` gives every environment's frame
+(so SB3's ``render()`` tiles them).
 
 **Per-environment attributes and methods.** SB3's ``get_attr`` / ``set_attr`` / ``env_method``
 address environments one by one; here the environments are rows of one batched core
@@ -74,6 +78,9 @@ class SB3VecEnv(VecEnv):
         )
         self._actions: np.ndarray | None = None
         self._lengths = np.zeros(self.num_envs, dtype=np.int64)
+        # each current stop's return before the adapter's first step in it (a staggered
+        # reset's warm-up), left out of its episode statistics
+        self._warmup_return = np.zeros(self.num_envs)
         self._t0 = time.perf_counter()
 
     def reset(self) -> np.ndarray:
@@ -86,6 +93,7 @@ class SB3VecEnv(VecEnv):
         self._reset_seeds()
         self._reset_options()
         self._lengths[:] = 0
+        self._warmup_return[:] = self.venv.core.episode_return
         return obs
 
     def step_async(self, actions: np.ndarray) -> None:
@@ -106,12 +114,13 @@ class SB3VecEnv(VecEnv):
                     "TimeLimit.truncated": bool(truncated[i] and not terminated[i]),
                     **final,
                     "episode": {
-                        "r": float(final["metrics"]["episode_return"]),
+                        "r": float(final["metrics"]["episode_return"] - self._warmup_return[i]),
                         "l": int(self._lengths[i]),
                         "t": elapsed,
                     },
                 }
                 self._lengths[i] = 0
+                self._warmup_return[i] = 0.0
         return obs, rewards.astype(np.float32), dones, infos
 
     def close(self) -> None:

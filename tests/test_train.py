@@ -266,7 +266,7 @@ def test_discrete_models_are_evaluated_in_discrete_mode(tmp_path):
     assert main(["train", "--config", str(cfg), "--out", str(out), "--no-progress"]) == 0
     policy = make_policy(str(out / "model.zip"))
     assert policy.env_kwargs["action_mode"] == "discrete"
-    with pytest.raises(ValueError, match="actions"):
+    with pytest.raises(ValueError, match="trained in action_mode 'discrete', this environment's"):
         policy.bind(BrakingCore(2))  # a continuous environment refuses it
     core = BrakingCore(2, action_mode="discrete")
     policy.bind(core)

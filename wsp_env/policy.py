@@ -59,8 +59,9 @@ class SB3Policy:
     (what ``wsp-env train`` writes beside every model and checkpoint), else SB3's checkpoint
     naming ``*_vecnormalize_N_steps.pkl``, else ``vecnormalize.pkl`` in the model's folder or
     the run folder above it — and the environment settings it was trained with
-    (``config.yaml`` of its run: action mode, valve grouping, privileged observations,
-    accelerometer, control period), which the evaluation then uses (``env_kwargs``). A
+    (``config.yaml`` of its run: action mode and its settings — residual, slip target —, valve
+    grouping, privileged observations, accelerometer, memory features, control period), which
+    the evaluation then uses (``env_kwargs``). A
     discrete-action model's valve modes (0 vent, 1 hold, 2 fill) therefore reach a
     discrete-mode environment, never read as continuous commands. Frame-stacked policies
     (``frame_stack`` in the run's config) get the stack built as ``VecFrameStack`` builds it
@@ -144,6 +145,12 @@ class SB3Policy:
             raise ValueError(
                 f"policy {self.name}: trained for vehicle {self.vehicle!r}, this run's vehicle "
                 f"is {core.vehicle.id!r}"
+            )
+        mode = self.env_kwargs.get("action_mode", "continuous")
+        if mode != core.action_mode:  # the residual and slip-target modes share their shapes
+            raise ValueError(
+                f"policy {self.name}: trained in action_mode {mode!r}, this environment's is "
+                f"{core.action_mode!r} (build it with the policy's env_kwargs)"
             )
         space = self.model.observation_space
         # a layout-0 model never saw the reference's age (the kernel's last entry): drop it
@@ -267,6 +274,8 @@ class SB3Policy:
 POLICY_ENV_KWARGS = (
     "action_mode", "residual_scale", "residual_deadband", "valve_group", "privileged",
     "accelerometer", "accelerometer_bias_mps2", "control_period_s", "action_repeat",
+    "slip_target_min_kmh", "slip_target_max_kmh", "slip_target_gain_per_kmh",
+    "slip_target_lead_s", "memory_features",
 )  # fmt: skip
 
 

@@ -387,8 +387,9 @@ def cmd_evaluate(args: argparse.Namespace) -> dict[str, Any]:
         env_kwargs = {"accelerometer": accel,
                       "sensors": dataclasses.asdict(TIER_SENSORS[args.tier])}  # fmt: skip
         # the tier decides the sensors; a learned policy keeps its spaces' own settings
-        policy_keys = ("action_mode", "residual_scale", "residual_deadband", "valve_group",
-                       "privileged", "control_period_s")  # fmt: skip
+        from wsp_env.evaluation.benchmark import POLICY_KEYS
+
+        policy_keys = (*POLICY_KEYS, "privileged", "control_period_s")
     report_tmp = _reserve(args, "report", "--report", "dir")
     results, records = [], {}
     with _executor(args) as executor:

@@ -51,6 +51,7 @@ from wsp_env.core.sensors import (
 )
 from wsp_env.core.simulator import RunSetup, TrainSim, draw_run_setup
 from wsp_env.physics import layout as L
+from wsp_env.physics.brake import PAD_FACTOR_MIN
 from wsp_env.physics.layout import CMD_HOLD
 
 
@@ -109,7 +110,12 @@ class ScenarioConfig:
             raise ConfigError(f"{prefix}rails: needs non-negative weights, not all zero")
 
 
-ACTION_MODES = ("continuous", "discrete", "residual")
+ACTION_MODES = ("continuous", "discrete", "residual", "slip_target")
+# slip-target mode: the bounds of the target sliding speed an action may ask for (km/h)
+SLIP_TARGET_MAX_KMH = 30.0
+# memory features (``memory_features=True``): how their three per-axle channels are scaled
+MEMORY_TIME_SCALE_S = 10.0  # time in the current slide, time since the last release: / 10 s
+MEMORY_ENERGY_SCALE_MJ = 1.0  # the sliding-energy estimate: / 1 MJ (the damage term's E_ref)
 # Timing bounds (the CLI's --dt-s shares them): a substep below 10 us only multiplies the work
 # (the linearly implicit scheme is stable at 1 ms, docs/physics.md; 1e-12 s made one step take
 # hours), a control period beyond 1 s is no WSP, and a stop lasts minutes, not hours.
@@ -157,6 +163,10 @@ class BrakingCore:
         substep_s: float = 1e-3,
         max_time_s: float = 300.0,
         residual_base: Any = None,
+        slip_target_min_kmh: float = 0.5,
+        slip_target_max_kmh: float = 8.0,
+        slip_target_loop: Any = None,
+        memory_features: bool = False,
     ) -> None:
         if isinstance(n_envs, bool) or not isinstance(n_envs, int | np.integer) or n_envs < 1:
             raise ValueError(f"n_envs: must be a positive integer, got {n_envs!r}")
@@ -184,6 +194,16 @@ class BrakingCore:
             raise ValueError(f"residual_scale: must be in (0, 1], got {residual_scale!r}")
         if not (np.isfinite(residual_deadband) and 0.0 <= residual_deadband < 1.0):
             raise ValueError(f"residual_deadband: must be in [0, 1), got {residual_deadband!r}")
+        lo = check_number(slip_target_min_kmh, "slip_target_min_kmh", ge=0.0,
+                          le=SLIP_TARGET_MAX_KMH)  # fmt: skip
+        hi = check_number(slip_target_max_kmh, "slip_target_max_kmh", ge=0.0,
+                          le=SLIP_TARGET_MAX_KMH)  # fmt: skip
+        if hi <= lo:
+            raise ValueError(
+                f"slip_target_max_kmh: must exceed slip_target_min_kmh ({lo:g}), got {hi:g}"
+            )
+        if not isinstance(memory_features, bool | np.bool_):
+            raise ValueError(f"memory_features: must be True or False, got {memory_features!r}")
         self.vehicle = veh
         self.reward = _config(RewardConfig, reward, "reward")
         self.scenario = _config(ScenarioConfig, scenario, "scenario")
@@ -218,7 +238,13 @@ class BrakingCore:
         self.kernel_obs_dim = kernel_dim
         self._kobs = np.zeros((n_envs, kernel_dim), dtype=np.float32)  # the kernel writes it
         residual = action_mode == "residual"
-        self.obs_dim = kernel_dim + (self.n_valves if residual else 0)
+        slip_target = action_mode == "slip_target"
+        self.memory_features = bool(memory_features)
+        memory_dim = 3 * self.n_axles if self.memory_features else 0
+        tail = self.n_valves if residual or slip_target else 0
+        self.obs_dim = kernel_dim + memory_dim + tail
+        # the observation beyond the kernel's: memory features, then the action mode's tail
+        self._extended = self.obs_dim > kernel_dim
         self.terms = np.zeros((n_envs, K.N_TERMS))
         self.flags = np.zeros((n_envs, K.N_F), dtype=np.int64)
         self.wsp = np.zeros((n_envs, K.N_W))
@@ -254,6 +280,28 @@ class BrakingCore:
         # (``residual_base``: the controller the residual acts on, a policy object with
         # ``bind`` / ``reset`` / ``act``; ``envs.make_core`` gives the frozen classical WSP)
         self.base: Any = None
+        self.loop: Any = None
+        self.slip_target_min_kmh, self.slip_target_max_kmh = lo, hi
+        if self._extended:
+            self._obs_full = np.zeros((n_envs, self.obs_dim), dtype=np.float32)
+            self._base_stale = True
+            self._base_pending: list[int] = list(range(n_envs))
+        if self.memory_features:  # per axle (module docstring of wsp_env.envs)
+            self.memory_slide_s = np.zeros((n_envs, self.n_axles))
+            self.memory_since_release_s = np.zeros((n_envs, self.n_axles))
+            self.memory_energy_J = np.zeros((n_envs, self.n_axles))
+        # slip-target mode: the inner loop (``slip_target_loop``, ``baselines.slip_target``;
+        # ``envs.make_core`` supplies it) advances once per period, as the residual's base does,
+        # and turns each period's targets into valve commands; ``slip_action``: the agent's last
+        # action (clipped), observed as the tail
+        if slip_target:
+            if slip_target_loop is None:
+                raise ValueError(
+                    "action_mode: 'slip_target' needs slip_target_loop (envs.make_core supplies "
+                    "the slip-target inner loop)"
+                )
+            self.loop = slip_target_loop
+            self.slip_action = np.ones((n_envs, self.n_valves))
         if residual:
             if residual_base is None:
                 raise ValueError(
@@ -262,9 +310,6 @@ class BrakingCore:
                 )
             self.base = residual_base
             self.base_action = np.ones((n_envs, self.n_valves), dtype=np.float32)
-            self._obs_full = np.zeros((n_envs, self.obs_dim), dtype=np.float32)
-            self._base_stale = True
-            self._base_pending: list[int] = list(range(n_envs))
 
         sim = self.sim
         self.params = Params(
@@ -283,35 +328,113 @@ class BrakingCore:
         )
         if self.base is not None:
             self.base.bind(self)  # last: a base may read anything of the core
+        if self.loop is not None:
+            self.loop.bind(self)
 
     # ---- observation ------------------------------------------------------------------------
 
     @property
     def obs(self) -> np.ndarray:
         """Current observations ``(n_envs, obs_dim)`` (module docstring)."""
-        if self.base is None:
+        if not self._extended:
             return self._kobs
         if self._base_stale:
             self._refresh_base()
         return self._obs_full
 
     def _refresh_base(self) -> None:
-        """Residual mode: advance the classical WSP one period on the current observations."""
+        """Once per period, on the first read after a step or a reset: the residual mode's
+        classical WSP or the slip-target loop advances one period on the current observations,
+        and the observation beyond the kernel's is assembled."""
         if self._base_pending:
-            self.base.reset(np.array(self._base_pending, dtype=np.int64))
+            ids = np.array(self._base_pending, dtype=np.int64)
+            for controller in (self.base, self.loop):
+                if controller is not None:
+                    controller.reset(ids)
             self._base_pending.clear()
-        self.base_action[...] = self.base.act(self._kobs)
+        if self.base is not None:
+            self.base_action[...] = self.base.act(self._kobs)
+        if self.loop is not None:
+            self.loop.advance(self._kobs)
         width = self._kobs.shape[1]
         self._obs_full[:, :width] = self._kobs
-        self._obs_full[:, width:] = self.base_action
+        if self.memory_features:
+            self._obs_full[:, width : width + 3 * self.n_axles] = self.memory_obs()
+        tail = self._tail()
+        if tail is not None:
+            self._obs_full[:, self.obs_dim - tail.shape[1] :] = tail
         self._base_stale = False
 
+    def _tail(self) -> np.ndarray | None:
+        """The action mode's last ``n_valves`` observation entries: the classical WSP's requests
+        (residual), the agent's last slip-target action (slip_target), else None."""
+        if self.base is not None:
+            return self.base_action
+        if self.loop is not None:
+            return self.slip_action
+        return None
+
+    def memory_obs(self, rows: Any = slice(None)) -> np.ndarray:
+        """The memory features of environments ``rows`` (all by default) as observed
+        ``(len(rows), 3 n_axles)``: time in the current slide and time since the last release
+        (each / ``MEMORY_TIME_SCALE_S``), the sliding-energy estimate
+        (/ ``MEMORY_ENERGY_SCALE_MJ``), clipped to the observation's bound (``memory_features``:
+        ``WSPBrakingEnv``'s docstring)."""
+        parts = (
+            self.memory_slide_s[rows] / MEMORY_TIME_SCALE_S,
+            self.memory_since_release_s[rows] / MEMORY_TIME_SCALE_S,
+            self.memory_energy_J[rows] * 1e-6 / MEMORY_ENERGY_SCALE_MJ,
+        )
+        return np.clip(np.concatenate(parts, axis=-1), -K.OBS_CLIP, K.OBS_CLIP)
+
+    def _update_memory(self, rows: Any = slice(None)) -> None:
+        """Advance the memory features of ``rows`` by the period just stepped, from what the
+        observation shows: the measured slip ``v_ref - v_i`` (wheel-speed readings, the shared
+        reference), the cylinder pressures, this period's valve commands (``WSPBrakingEnv``'s
+        docstring: Observation Space, memory features)."""
+        sim, dt = self.sim, self.sim.control_period_s
+        env_par, axle_par = sim.env_par[rows], sim.axle_par[rows]
+        v_ref = self.wsp[rows, K.W_VREF]
+        slip = v_ref[:, None] - self.axle_wsp[rows, :, K.AW_WHEEL]
+        # the metrics' slide threshold max(3 km/h, 20 % of the speed), on the reference
+        threshold = np.maximum(env_par[:, L.EP_SLIDE_THRESH], env_par[:, L.EP_SLIDE_REL] * v_ref)
+        sliding = slip > threshold[:, None]
+        self.memory_slide_s[rows] = np.where(sliding, self.memory_slide_s[rows] + dt, 0.0)
+        # a release: the valve asked for under the watchdog's release fraction of the demand;
+        # the period's commands as the valves got them, after the watchdog's say
+        cmd = sim.cmd[rows]
+        vent = (cmd >= 0.0) & (cmd < self.obs_par[K.OP_WD_RELEASE_FRACTION])
+        self.memory_since_release_s[rows] = np.where(
+            vent, 0.0, self.memory_since_release_s[rows] + dt
+        )
+        # brake force at the rail from the observed pressure and the vehicle's brake constants,
+        # the pads' nominal friction at the reference speed (the stop's drawn pad scale is
+        # unknown to a WSP): brake.brake_torque / r with pad_factor's scale 1
+        pad = np.maximum(
+            PAD_FACTOR_MIN, 1.0 + env_par[:, L.EP_PAD_SLOPE] * (v_ref - env_par[:, L.EP_PAD_VREF])
+        )
+        p = sim.axle_state[rows, :, L.AS_P]
+        force = (
+            axle_par[:, :, L.AP_BRAKE_GAIN]
+            * np.maximum(p - axle_par[:, :, L.AP_P_THRESH], 0.0)
+            * pad[:, None]
+            / axle_par[:, :, L.AP_RADIUS]
+        )
+        self.memory_energy_J[rows] += force * np.maximum(slip, 0.0) * dt
+
     def final_obs(self, e: int) -> np.ndarray:
-        """The observation env ``e`` ended with, without advancing the classical WSP (residual
-        mode: its requests of the last period stand in; nothing acts on a final observation)."""
-        if self.base is None:
+        """The observation env ``e`` ended with, without advancing the classical WSP or the
+        slip-target loop (their last period's entries stand in; nothing acts on a final
+        observation)."""
+        if not self._extended:
             return self._kobs[e].copy()
-        return np.concatenate([self._kobs[e], self.base_action[e]])
+        parts = [self._kobs[e]]
+        if self.memory_features:
+            parts.append(self.memory_obs(e))  # its row only
+        tail = self._tail()
+        if tail is not None:
+            parts.append(tail[e])
+        return np.concatenate(parts).astype(np.float32)
 
     # ---- spaces ----------------------------------------------------------------------------
 
@@ -387,7 +510,13 @@ class BrakingCore:
         self.axle_wsp[e, :, K.AW_SCALE] = scales
         self.sensor_rng[e] = noise_seed
         K.reset_observation(e, self.params, self.state, sim.control_period_s)
-        if self.base is not None:
+        if self.memory_features:
+            self.memory_slide_s[e] = 0.0
+            self.memory_since_release_s[e] = 0.0
+            self.memory_energy_J[e] = 0.0
+        if self.loop is not None:
+            self.slip_action[e] = 1.0
+        if self._extended:
             self._base_pending.append(e)
             self._base_stale = True
         self.episode_return[e] = 0.0
@@ -437,10 +566,23 @@ class BrakingCore:
             raise ValueError("action: discrete valve modes must be 0 (vent), 1 (hold) or 2 (fill)")
         return a
 
+    def slip_targets_kmh(self, actions: np.ndarray) -> np.ndarray:
+        """Slip-target mode: the target sliding speeds (km/h) of ``actions`` (clipped to
+        [-1, 1]): ``min + (a + 1) / 2 (max - min)``."""
+        a = np.clip(np.asarray(actions, dtype=np.float64), -1.0, 1.0)
+        lo, hi = self.slip_target_min_kmh, self.slip_target_max_kmh
+        return lo + 0.5 * (a + 1.0) * (hi - lo)
+
     def compose(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         """Residual mode: the valve actions the residual ``actions`` make of the classical WSP's
-        requests for this period, and the count of clipped components per env; otherwise
-        ``actions`` unchanged and None."""
+        requests for this period, and the count of clipped components per env; slip-target
+        mode: the inner loop's valve actions for the targets ``actions`` ask for, and the same
+        count; otherwise ``actions`` unchanged and None."""
+        if self.loop is not None:
+            if self._base_stale:
+                self._refresh_base()
+            clipped = (np.clip(actions, -1.0, 1.0) != actions).sum(axis=1)
+            return self.loop.command(self._kobs, self.slip_targets_kmh(actions)), clipped
         if self.base is None:
             return actions, None
         if self._base_stale:
@@ -469,10 +611,16 @@ class BrakingCore:
         every environment must have been reset (``reset_env``) at least once."""
         if not self._all_started:
             self._check_started()
+        given = actions
         actions, clipped = self.compose(actions)
         self._step_fn(self.mode, actions, *self._step_args)
-        if clipped is not None:  # residual mode
+        if clipped is not None:  # residual and slip-target modes: the agent's clipped entries
             self.flags[:, K.F_CLIPPED] = clipped
+        if self.loop is not None:
+            self.slip_action[...] = np.clip(given, -1.0, 1.0)
+        if self.memory_features:
+            self._update_memory()
+        if self._extended:
             self._base_stale = True
 
     def _check_started(self) -> None:
@@ -547,7 +695,9 @@ class BrakingCore:
             )  # fmt: skip
         K.write_observation(e, self.params, external, sim.control_period_s)
         self.prev_wheel[e] = wheel_speed_mps
-        if self.base is not None:
+        if self.memory_features and decel_mps2 is not None:
+            self._update_memory(slice(e, e + 1))
+        if self._extended:
             self._base_stale = True
 
     def act_external(self, e: int, actions: np.ndarray) -> np.ndarray:
@@ -559,6 +709,8 @@ class BrakingCore:
         K.watchdog_commands(0, cmd, self.wsp[e : e + 1], self.axle_wsp[e : e + 1], self.obs_par)
         cmd = cmd[0]
         self.sim.cmd[e] = cmd  # the period's commands, for the estimator's next update
+        if self.loop is not None:
+            self.slip_action[e] = np.clip(np.asarray(actions, dtype=float)[e], -1.0, 1.0)
         if self.mode == K.MODE_CONTINUOUS:
             self.prev_action[e] = np.clip(self.compose(actions)[0][e], -1.0, 1.0)
         else:
@@ -567,6 +719,7 @@ class BrakingCore:
 
     # ---- state (checkpoints: a resumed training run continues bit for bit) -----------------
 
+    _MEMORY_ARRAYS = ("memory_slide_s", "memory_since_release_s", "memory_energy_J")
     _STATE_ARRAYS = ("_kobs", "terms", "flags", "wsp", "axle_wsp", "sensor_par", "sensor_rng",
                      "prev_wheel", "prev_action", "episode_return", "episode_terms")  # fmt: skip
     _SIM_ARRAYS = ("env_par", "axle_par", "sections", "env_state", "axle_state", "field",
@@ -590,6 +743,19 @@ class BrakingCore:
                 "stale": self._base_stale,
                 "pending": list(self._base_pending),
             }
+        elif self._extended:
+            state["extended"] = {
+                "obs": self._obs_full.copy(),
+                "stale": self._base_stale,
+                "pending": list(self._base_pending),
+            }
+        if self.loop is not None:
+            state["slip_target"] = {
+                "loop": self.loop.state_dict(),
+                "action": self.slip_action.copy(),
+            }
+        if self.memory_features:
+            state["memory"] = {k: getattr(self, k).copy() for k in self._MEMORY_ARRAYS}
         return state
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
@@ -618,6 +784,17 @@ class BrakingCore:
             self._obs_full[...] = base["obs"]
             self._base_stale = bool(base["stale"])
             self._base_pending[:] = base["pending"]
+        elif self._extended:
+            ext = state["extended"]
+            self._obs_full[...] = ext["obs"]
+            self._base_stale = bool(ext["stale"])
+            self._base_pending[:] = ext["pending"]
+        if self.loop is not None:
+            self.loop.load_state_dict(state["slip_target"]["loop"])
+            self.slip_action[...] = state["slip_target"]["action"]
+        if self.memory_features:
+            for k in self._MEMORY_ARRAYS:
+                getattr(self, k)[...] = state["memory"][k]
 
     def episode_info(self, e: int) -> dict[str, Any]:
         metrics = run_metrics(self.sim, e)

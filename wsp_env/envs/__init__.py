@@ -7,10 +7,11 @@ from wsp_env.envs.wsp_braking import (
     WSPBrakingEnv,
     WSPBrakingVectorEnv,
     check_action_repeat,
+    check_stagger_reset_steps,
     make_core,
 )
 
 __all__ = [
     "RewardConfig", "ScenarioConfig", "WSPBrakingEnv", "WSPBrakingVectorEnv",
-    "check_action_repeat", "make_core",
+    "check_action_repeat", "check_stagger_reset_steps", "make_core",
 ]  # fmt: skip

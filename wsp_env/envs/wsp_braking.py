@@ -27,6 +27,44 @@ the demand, ``f_j`` the classical WSP's own request, so the zero action *is* the
 ``residual_deadband`` zeroes residuals up to that size and rescales the rest continuously
 (``sign(a) (|a| - band) / (1 - band)``): small, ever-changing outputs would otherwise move
 every *hold* a little, and each small drop of the target vents air.
+``action_mode="slip_target"``: ``Box(-1, 1, (n_valves,))``, valve ``j``'s target **measured
+sliding speed** ``s*_j = slip_target_min_kmh + (a_j + 1) / 2 (slip_target_max_kmh -
+slip_target_min_kmh)`` km/h (0.5-8 km/h by default, ``a = 0`` 4.25 km/h: the oracle's targets on
+soap are 1-8 km/h, its rail-aware teacher's 4 km/h), tracked every control period — also inside
+an ``action_repeat`` step — by an inner loop that reads only the observation
+(``baselines.slip_target.SlipTargetLoop``): the measured slip ahead,
+``s_i = v_ref - v_i + slip_target_lead_s (d_i - d_ref)`` (km/h; ``d_i`` the wheel's measured
+deceleration, ``d_ref`` the reference speed's, so ``d_i - d_ref`` is the measured slip's rate;
+the lead 0.1 s: the pneumatics' lag), a proportional law on the pressure fraction
+``clip(p_i / p_d + slip_target_gain_per_kmh (s*_j - s_i), 0, 1)`` of the demand (0.2 per km/h;
+``p_i / p_d`` is the classical WSP's *hold*), the classical WSP's recovery
+hold, minimum speed and **periodic release** (one axle in turn vented until the reference
+re-anchors on it: without it the reference falls below the train while every axle slides at
+its target, and the wheels lock with their measured slip on target), on the thresholds of the
+sensor tier's frozen classical WSP; a bogie valve takes its most cautious axle's request. The
+measured slip settles on the target (median mid-stop 3.86-3.98 km/h for 4 km/h on soap).
+**The watchdog still acts** on the loop's valve commands (Safety watchdog): a target of 0
+(``slip_target_min_kmh=0``, ``a = -1``) asks for no measured slip, so from a stop's start the
+cylinders stay nearly empty; with ideal sensors every axle is released, and the
+minimum-deceleration supervision overrides every release 5.8-6.3 s into the stop (the demand's
+build-up and its 3 s), after which every axle gets the full demand until standstill whatever
+the target (on soap the wheels then lock: the longest lock of six stops 57 s from 120 km/h);
+with the wheel-sensor tier's scale errors some axles fill, the others stay empty until the
+10 s safety time restores them, and they lock on soap. Hence the default minimum of 0.5 km/h: ``a = -1`` then fills until the wheels
+slip that much, and held from the start of 36 stops (dry and soap, 120-160 km/h, ideal and
+wheel-tier sensors) it never brought the watchdog in
+(``scripts/slip_target_study.py --part zero``). With the wheel-sensor tier, six seeds each,
+against its classical WSP (``--part table``): on soap 0.07 at 120 km/h a constant 4 km/h target
+stops 2-5 % shorter with 11-24 % less sliding energy (2 km/h: 3-7 % longer, half the energy);
+on oil at 100 km/h 4-9 % shorter. On leaves at 100 km/h (adhesion 0.029-0.042) one target on
+every axle keeps all the wheels within the estimator's working band of each other, which the
+minimum-deceleration supervision reads as gripping wheels while the rail gives too little
+deceleration: it trips in 5 of 6 stops at 4 km/h and 1 of 6 at 2 km/h, and its full demand
+then locks the wheels to standstill — the targets are the learner's to choose per axle and
+stop.
+``SlipTargetPolicy`` runs the same loop with a constant target from outside, in continuous mode,
+bit for bit the same stop. The kernel's previous-action entries hold the loop's valve commands;
+the agent's own last action is the observation's tail.
 Valves are per axle (``n_valves = n_axles``), or per bogie with ``valve_group="bogie"``.
 
 ## Observation Space
@@ -54,10 +92,33 @@ wheel that rolls freely (brake off 0.3 s, not spinning up).
 | ``privileged=True``: next ``1 + 2n`` | true train speed ``V``; friction level of axle ``i``; true creepage ``(V - v_i)`` | m/s; -; m/s | ``/ v_s``; none; ``/ max(V, 1 m/s)``, clipped |
 | ``accelerometer=True``: next 1 | the body accelerometer's deceleration over the period (a specific force: the gradient's ``g sin(theta)`` is missing from it, plus a bias drawn per episode within ``+-accelerometer_bias_mps2``, noise and lag: ``SensorConfig``) | m/s^2 | ``/ a_s``, clipped |
 | next 1 | the reference's age: seconds since the estimator's last anchor, counted once the valves have worked since it (a periodic release is due when it grows) | s | ``/ 10 s``, clipped |
+| ``memory_features=True``: next ``n`` | time in the current slide of axle ``i``: how long its measured slip ``v_ref - v_i`` has stayed above the metrics' slide threshold ``max(3 km/h, 20 % v_ref)`` (the classical WSP's is 3.1 km/h, 18 %), 0 when it is below | s | ``/ 10 s``, clipped |
+| ``memory_features=True``: next ``n`` | time since axle ``i``'s last release (its valve's command, as the watchdog let it through, under the watchdog's release fraction, 5 %, of the demand) or the stop's start | s | ``/ 10 s``, clipped |
+| ``memory_features=True``: next ``n`` | axle ``i``'s sliding-energy **estimate**: the sum over periods of ``F_i max(v_ref - v_i, 0) dt``, ``F_i`` the brake force at the rail from the observed cylinder pressure and the vehicle's brake constants (``gain (p_i - p_threshold)^+ / r`` at the pads' nominal friction for ``v_ref``: the stop's pad scale is unknown to a WSP) | MJ | ``/ 1 MJ``, clipped (at 5 MJ) |
 | ``action_mode="residual"``: last ``m`` | the classical WSP's requests for this period | - | as actions in ``[-1, 1]`` |
+| ``action_mode="slip_target"``: last ``m`` | the agent's last action (the slip targets in force), clipped; 1 at a stop's start | - | as actions in ``[-1, 1]`` |
 
-So ``obs_dim = 4n + 3 + m (+ 1 + 2n privileged) (+ 1 accelerometer) (+ m residual)``: 23 for the
-4-axle ``uic_z1`` with per-axle valves.
+So ``obs_dim = 4n + 3 + m (+ 1 + 2n privileged) (+ 1 accelerometer) (+ 3n memory) (+ m
+residual or slip_target)``: 23 for the 4-axle ``uic_z1`` with per-axle valves.
+
+The memory features are what a WSP can keep of the past from what it measures, so that the
+damage term (a function of each axle's cumulative sliding energy) is a function of what is
+observed: they are zero at a reset (each environment's own autoreset in the vector class) and
+advance once per control period (``action_repeat`` k: k periods, ``k * control_period_s`` on
+the timers, per step). The energy estimate reads 0.63-1.05 of each axle's true sliding energy
+(``info["metrics"]["axles"][i]["sliding_energy_kJ"]``) under the classical WSP and 0.70-0.98
+under a constant 4 km/h slip target with ideal sensors, 0.59-1.05 and 0.71-1.02 with the
+benchmark's wheel-sensor tier (noise, resolution, +-0.5 % scale errors; soap 0.05-0.08 at
+60-160 km/h, four seeds: ``scripts/memory_energy_study.py``): low, as the reference sags a
+little below the train between anchors and the stop's pad scale is unknown. Subtracting the
+wheelset's inertial term ``J a_i / r^2`` from the force, or counting only the slip beyond what
+the scale errors make (``2 e v_ref``), moved it further from the truth on those stops, so
+neither is done. On locked wheels (``none``) it overestimates, 1.04-3.15 times the truth on
+the same stops with either sensor set: the pads then hold more than the rail carries (most on
+the lowest adhesion), which the reference's fall below the train (no wheel to anchor on) only
+partly offsets. The observed channel clips at 5 MJ, which locked axles pass on soap from
+120 km/h (up to 9 MJ there; 2.2 MJ from 60 km/h); the core's ``memory_energy_J`` does not clip
+(``tests/test_memory_features.py``).
 
 ## Safety watchdog
 
@@ -68,7 +129,8 @@ for longer than the safety time (10 s) gets the full demand back until standstil
 deceleration the sensors measure, less the gradient's part, stays below 0.2 m/s^2 for 3 s while
 the full demand stands and every wheel grips, every release is overridden until standstill.
 ``info["metrics"]["watchdog"]`` counts its interventions. The observation's previous action is
-the agent's own.
+the agent's own (the valve action it gave; in the slip-target mode the inner loop's), not the
+watchdog's.
 
 ## Rewards
 
@@ -170,6 +232,12 @@ num_envs=N, **kwargs)``:
 | ``extra_rails`` | dict or None | None | further ``RailConfig`` objects by name |
 | ``control_period_s`` | float | ``0.02`` | the BCU cycle: sensors, estimator, watchdog and valves run at it |
 | ``action_repeat`` | int | ``1`` | control periods per step (Action repeat): a decision every ``action_repeat * control_period_s`` |
+| ``slip_target_min_kmh`` | float | ``0.5`` | slip-target mode: the target of action -1, km/h, [0, 30] (0 lets the watchdog in: Action Space) |
+| ``slip_target_max_kmh`` | float | ``8.0`` | slip-target mode: the target of action +1, km/h, above the minimum, at most 30 |
+| ``slip_target_gain_per_kmh`` | float | ``0.2`` | slip-target mode: the inner loop's demand fraction per km/h of slip error, (0, 10] |
+| ``slip_target_lead_s`` | float | ``0.1`` | slip-target mode: the inner loop's lead on the measured wheel deceleration, s, [0, 1] |
+| ``stagger_reset_steps`` | int | ``0`` | vector class only (the single class takes only 0), a training option: ``reset`` advances each environment a random, seeded number of steps below this into a stop, driven by the classical WSP, so that stops do not all end together (``WSPBrakingVectorEnv``'s docstring); 0: off |
+| ``memory_features`` | bool | False | append the memory features (Observation Space): per axle time in the current slide, time since the last release, sliding-energy estimate |
 | ``substep_s`` | float | ``0.001`` | the physics substep (linearly implicit; docs/physics.md) |
 | ``max_time_s`` | float | ``300.0`` | truncation after ``ceil(max_time_s / control_period_s)`` steps (Episode End) |
 | ``render_mode`` | str or None | None | ``"rgb_array"``: ``render()`` returns a frame, ``(480, 640, 3)`` uint8, of the last 10 s (wheel speeds against the train and the reference, slips, cylinder pressures against the demand; one figure reused, > 50 frames/s); ``"human"``: the same in a matplotlib window, updated at every step (with a non-interactive backend, e.g. ``MPLBACKEND=Agg`` or no display, drawn but not shown); ``wsp_env.envs.rendering`` |
@@ -194,7 +262,8 @@ num_envs=N, **kwargs)``:
   one step later where the simulated time's float sum fell short of ``max_time_s``: 15,001
   steps at 300 s); the made environment's ``spec.max_episode_steps`` is that limit; the
   ``human`` render mode, and frames of the last 10 s on one reused figure; ``action_repeat``
-  (default 1: unchanged).
+  (default 1: unchanged); the ``slip_target`` action mode and ``memory_features`` (off by
+  default: unchanged).
 """
 
 from __future__ import annotations
@@ -221,12 +290,25 @@ def make_core(n_envs: int, **kwargs: Any) -> BrakingCore:
     """A :class:`BrakingCore` of ``n_envs`` environments with ``WSPBrakingEnv``'s arguments; with
     ``action_mode="residual"`` the frozen classical WSP of the sensor tier
     (``configs/wsp/classical.yaml``, with ``accelerometer`` ``classical_accel.yaml``) is the
-    controller the residual acts on."""
-    if kwargs.get("action_mode") == "residual":
+    controller the residual acts on; with ``action_mode="slip_target"`` the slip-target inner
+    loop (``baselines.slip_target.SlipTargetLoop``, with ``slip_target_gain_per_kmh`` and
+    ``slip_target_lead_s``, on the same tier's classical thresholds) tracks the targets."""
+    from wsp_env.baselines.slip_target import SlipTargetLoop, check_loop_args
+
+    # the loop's own arguments: checked in every mode (as residual_scale is), used in one
+    gain, lead = check_loop_args(
+        kwargs.pop("slip_target_gain_per_kmh", 0.2), kwargs.pop("slip_target_lead_s", 0.1)
+    )
+    mode = kwargs.get("action_mode")
+    if mode in ("residual", "slip_target"):
         from wsp_env.baselines.classical import ClassicalWSP, load_wsp_config
 
         tier = "wheels+accel" if kwargs.get("accelerometer") else "wheels"
-        kwargs.setdefault("residual_base", ClassicalWSP(load_wsp_config(tier=tier)))
+        if mode == "residual":
+            kwargs.setdefault("residual_base", ClassicalWSP(load_wsp_config(tier=tier)))
+        else:
+            loop = SlipTargetLoop(load_wsp_config(tier=tier), gain_per_kmh=gain, lead_s=lead)
+            kwargs.setdefault("slip_target_loop", loop)
     return BrakingCore(n_envs, **kwargs)
 
 
@@ -237,6 +319,7 @@ def episode_step_limit(max_time_s: float, control_period_s: float) -> int:
 
 
 ACTION_REPEAT_MAX = 50
+STAGGER_RESET_MAX = 100_000
 
 
 def check_action_repeat(action_repeat: Any) -> int:
@@ -250,6 +333,20 @@ def check_action_repeat(action_repeat: Any) -> int:
             f"action_repeat: must be an integer 1-{ACTION_REPEAT_MAX}, got {action_repeat!r}"
         )
     return int(action_repeat)
+
+
+def check_stagger_reset_steps(steps: Any) -> int:
+    """``stagger_reset_steps`` as an int in 0-``STAGGER_RESET_MAX``, or a one-line
+    ``ValueError``."""
+    if (
+        isinstance(steps, bool)
+        or not isinstance(steps, int | np.integer)
+        or not 0 <= steps <= STAGGER_RESET_MAX
+    ):
+        raise ValueError(
+            f"stagger_reset_steps: must be an integer 0-{STAGGER_RESET_MAX}, got {steps!r}"
+        )
+    return int(steps)
 
 
 def _spec_with_limit(spec: EnvSpec | None, max_episode_steps: int) -> EnvSpec | None:
@@ -287,10 +384,25 @@ class WSPBrakingEnv(gym.Env):
         substep_s: float = 1e-3,
         max_time_s: float = 300.0,
         action_repeat: int = 1,
+        slip_target_min_kmh: float = 0.5,
+        slip_target_max_kmh: float = 8.0,
+        slip_target_gain_per_kmh: float = 0.2,
+        slip_target_lead_s: float = 0.1,
+        memory_features: bool = False,
+        stagger_reset_steps: int = 0,
     ) -> None:
         if render_mode not in (None, *self.metadata["render_modes"]):
             raise ValueError(f"render_mode: {render_mode!r} (supported: human, rgb_array)")
         self.action_repeat = check_action_repeat(action_repeat)
+        # the vector class's option, accepted here only as 0 (off), so a configuration that
+        # sets it for a single environment (gymnasium.make, make_vec's sync and async modes)
+        # is told so in one line
+        if check_stagger_reset_steps(stagger_reset_steps) > 0:
+            raise ValueError(
+                f"stagger_reset_steps: a vector-environment option (WSPBrakingVectorEnv; "
+                f'gymnasium.make_vec(..., vectorization_mode="vector_entry_point")): one '
+                f"environment has no batch to stagger, got {stagger_reset_steps!r}"
+            )
         self.render_mode = render_mode
         self.core = make_core(
             1, vehicle=vehicle, action_mode=action_mode, residual_scale=residual_scale,
@@ -298,6 +410,9 @@ class WSPBrakingEnv(gym.Env):
             accelerometer=accelerometer, accelerometer_bias_mps2=accelerometer_bias_mps2,
             sensors=sensors, estimator=estimator, watchdog=watchdog, reward=reward, scenario=scenario, rails_config=rails_config, extra_rails=extra_rails,
             control_period_s=control_period_s, substep_s=substep_s, max_time_s=max_time_s,
+            slip_target_min_kmh=slip_target_min_kmh, slip_target_max_kmh=slip_target_max_kmh,
+            slip_target_gain_per_kmh=slip_target_gain_per_kmh,
+            slip_target_lead_s=slip_target_lead_s, memory_features=memory_features,
         )  # fmt: skip
         self.action_space = self.core.action_space()
         self.observation_space = self.core.observation_space()
@@ -398,7 +513,27 @@ class WSPBrakingVectorEnv(VectorEnv):
     limit (what ``gymnasium.make_vec`` passes on); without ``max_time_s`` it sets
     ``max_time_s = max_episode_steps * control_period_s``, with both the earlier truncates.
     ``render_mode``: ``"rgb_array"`` only (one frame per environment, drawn in turn on one
-    figure)."""
+    figure).
+
+    ``stagger_reset_steps=K`` (0, off, by default; at most ``STAGGER_RESET_MAX``): a training
+    option. Environments reset together would end their stops together, and a learning curve
+    of the episodes that ended is then length-biased (short stops first). With ``K > 0``
+    every ``reset`` then advances environment ``i`` ``k_i`` steps (``k_i action_repeat``
+    control periods) into a stop, ``k_i`` uniform in ``0 .. K-1``, drawn from ``reset``'s seed
+    (reproducible with one; its own generator, so each environment's scenarios are still drawn
+    from its seed): the batch is stepped ``max(k)`` times and environment ``i``'s stop starts
+    anew (its next scenario, ``options`` as given) ``max(k) - k_i`` steps in, stops that end in
+    between autoresetting as in any step. The warm-up is driven period by period by the
+    classical WSP of the sensor tier (``continuous``; ``discrete``: its vent / hold / fill;
+    ``residual``: the zero residual, which is it; ``slip_target``: the zero action, the middle
+    target, run by the inner loop), exactly the stop that controller gives from the start, so
+    no stop starts from a state a controller would never leave; the residual's classical WSP
+    and the slip-target loop advance once per period in it, as in any step. The returned
+    observation and ``info["scenario"]`` are where each environment stands; ``episode_steps``
+    counts its steps into the stop, and its return so far is in the core's
+    ``episode_return`` (``SB3VecEnv`` leaves it out of its first episode's statistics). It
+    costs ``max(k)`` batched steps per ``reset`` (a stop is 500-4,500 steps: ``K`` about
+    2,000 spreads them)."""
 
     metadata: ClassVar[dict[str, Any]] = {
         "render_modes": ["rgb_array"],
@@ -431,10 +566,17 @@ class WSPBrakingVectorEnv(VectorEnv):
         substep_s: float = 1e-3,
         max_time_s: float | None = None,
         action_repeat: int = 1,
+        slip_target_min_kmh: float = 0.5,
+        slip_target_max_kmh: float = 8.0,
+        slip_target_gain_per_kmh: float = 0.2,
+        slip_target_lead_s: float = 0.1,
+        memory_features: bool = False,
+        stagger_reset_steps: int = 0,
     ) -> None:
         if render_mode not in (None, *self.metadata["render_modes"]):
             raise ValueError(f"render_mode: {render_mode!r} (supported: rgb_array)")
         self.action_repeat = check_action_repeat(action_repeat)
+        self.stagger_reset_steps = check_stagger_reset_steps(stagger_reset_steps)
         if max_episode_steps is not None and (
             isinstance(max_episode_steps, bool)
             or not isinstance(max_episode_steps, int | np.integer)
@@ -452,6 +594,9 @@ class WSPBrakingVectorEnv(VectorEnv):
             accelerometer=accelerometer, accelerometer_bias_mps2=accelerometer_bias_mps2,
             sensors=sensors, estimator=estimator, watchdog=watchdog, reward=reward, scenario=scenario, rails_config=rails_config, extra_rails=extra_rails,
             control_period_s=control_period_s, substep_s=substep_s, max_time_s=max_time_s,
+            slip_target_min_kmh=slip_target_min_kmh, slip_target_max_kmh=slip_target_max_kmh,
+            slip_target_gain_per_kmh=slip_target_gain_per_kmh,
+            slip_target_lead_s=slip_target_lead_s, memory_features=memory_features,
         )  # fmt: skip
         self.num_envs = num_envs
         self.render_mode = render_mode
@@ -514,7 +659,88 @@ class WSPBrakingVectorEnv(VectorEnv):
         if self.render_history is not None:
             self.render_history.clear(slice(None))
             self.render_history.record()
+        if self.stagger_reset_steps > 0:
+            known = seeds if all(s is not None for s in seeds) else None
+            self._stagger(np.random.default_rng(known), each)
+            scenarios = [self.core.describe(i) for i in range(self.num_envs)]
         return self.core.obs.copy(), {"scenario": np.array(scenarios, dtype=object)}
+
+    def _stagger(self, rng: np.random.Generator, options: list[dict[str, Any] | None]) -> None:
+        """``stagger_reset_steps``: advance environment ``i`` ``k_i`` steps into a stop
+        (class docstring), driven period by period by the tier's classical WSP."""
+        from wsp_env.baselines.classical import ClassicalWSP, load_wsp_config
+
+        core, n = self.core, self.num_envs
+        offsets = rng.integers(0, self.stagger_reset_steps, size=n)
+        total = int(offsets.max())
+        start_at = total - offsets  # the warm-up step at which environment i starts anew
+        driver = None
+        if core.action_mode in ("continuous", "discrete"):
+            tier = "wheels+accel" if core.accelerometer else "wheels"
+            driver = ClassicalWSP(load_wsp_config(tier=tier))
+            driver.bind(core)
+            driver.reset(np.arange(n))
+        for t in range(1, total + 1):
+            self._warm_step(driver, np.flatnonzero(start_at == t), options)
+
+    def _warm_step(
+        self, driver: Any, fresh: np.ndarray, options: list[dict[str, Any] | None]
+    ) -> None:
+        """One step of the staggered warm-up: ``action_repeat`` control periods, each driven by
+        ``driver`` (the classical WSP, on every period's observation, as its timers assume; in
+        the residual and slip-target modes the zero action: the classical WSP itself, the
+        middle target), a stop that ends within them held where it ended (``freeze``) and
+        started anew at the step's end, as ``step`` does, with nothing recorded of it; then
+        environments ``fresh`` start their stop (``options``). Every reset comes before anything
+        reads the observation, as an autoreset does, so the residual's base or the slip-target
+        loop advances exactly once in each period (``BrakingCore.obs``)."""
+        core, n = self.core, self.num_envs
+        zeros = np.zeros((n, core.n_valves))
+        done = np.zeros(n, dtype=bool)
+        for _ in range(self.action_repeat):
+            if driver is None:
+                a = zeros
+            else:
+                a = driver.act(core.obs).astype(np.float64)
+                if core.action_mode == "discrete":  # vent -1, apply +1, anything between a hold
+                    a = np.where(a <= -1.0, 0.0, np.where(a >= 1.0, 2.0, 1.0))
+            core.step(a)
+            live = ~done
+            period = np.where(live[:, None], core.terms, 0.0)
+            core.episode_return += period.sum(axis=1)
+            core.episode_terms += period
+            self.episode_periods += live
+            end = live & (
+                core.flags[:, K.F_TERMINATED].astype(bool)
+                | core.flags[:, K.F_TRUNCATED].astype(bool)
+                | (self.episode_periods >= self.period_limit)
+            )
+            for e in np.flatnonzero(end):
+                core.freeze(int(e))
+            done |= end
+            if done.all():
+                break
+        self.episode_steps += 1
+        done[fresh] = False  # their stop starts anew below, with its options
+        for e in np.flatnonzero(done):
+            core.reset_env(int(e), None)
+        for e in fresh:
+            core.reset_env(int(e), options[e])
+        self._started_anew(np.union1d(np.flatnonzero(done), fresh), driver)
+        if self.render_history is not None:
+            self.render_history.record()
+
+    def _started_anew(self, envs: np.ndarray, driver: Any) -> None:
+        """Environments ``envs`` were just reset within the warm-up: their counts, the driver's
+        state and their frames start anew."""
+        if not envs.size:
+            return
+        self.episode_steps[envs] = 0
+        self.episode_periods[envs] = 0
+        if driver is not None:
+            driver.reset(envs)
+        if self.render_history is not None:
+            self.render_history.clear(envs)
 
     def step(
         self, actions: Any

@@ -51,8 +51,12 @@ MIN_GAIN = 0.05  # return units (x 100 m): the classical WSP's least gain for a 
 BOOTSTRAP = 2000
 GRADIENT_LEVEL_PERMILLE = 2.0  # |gradient| below this is "level"
 SPEED_BANDS_KMH = (100.0, 160.0)  # <100, 100-160, >=160
-# the environment settings a policy may choose; the tier fixes every other one
-POLICY_KEYS = ("action_mode", "residual_scale", "residual_deadband", "valve_group")
+# the environment settings a policy may choose (its actions' meaning and what it derives from
+# the tier's sensors); the tier fixes every other one
+POLICY_KEYS = (
+    "action_mode", "residual_scale", "residual_deadband", "valve_group", "slip_target_min_kmh",
+    "slip_target_max_kmh", "slip_target_gain_per_kmh", "slip_target_lead_s", "memory_features",
+)  # fmt: skip
 RESERVED = ("none", "classical", "oracle")  # the score's ends and the upper reference
 
 

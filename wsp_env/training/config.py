@@ -31,6 +31,8 @@ ENV_KWARGS = (
     "accelerometer", "accelerometer_bias_mps2", "sensors", "estimator", "watchdog", "reward",
     "scenario", "rails_config",
     "control_period_s", "substep_s", "max_time_s", "action_repeat",
+    "slip_target_min_kmh", "slip_target_max_kmh", "slip_target_gain_per_kmh",
+    "slip_target_lead_s", "memory_features", "stagger_reset_steps",
 )  # fmt: skip
 SCHEDULE = re.compile(r"^lin_([0-9.eE+-]+)$")
 JUDGING_SUITES = ("heldout", "en15595")  # never used for model selection
@@ -321,14 +323,19 @@ def _is_net_arch(v: Any) -> bool:
 
 def check_env_kwargs(env_kwargs: dict[str, Any]) -> None:
     """Build one environment from ``env_kwargs``: every field checked by the environment."""
-    from wsp_env.envs import check_action_repeat, make_core
+    from wsp_env.envs import check_action_repeat, check_stagger_reset_steps, make_core
 
     kwargs = dict(env_kwargs)
-    if "action_repeat" in kwargs:  # the environment's, not the core's
-        try:
-            check_action_repeat(kwargs.pop("action_repeat"))
-        except ValueError as err:
-            raise ConfigError(f"env_kwargs.{err}") from None
+    # the environments' own, not the core's: the repeat, and the vector env's staggered resets
+    for name, check in (
+        ("action_repeat", check_action_repeat),
+        ("stagger_reset_steps", check_stagger_reset_steps),
+    ):
+        if name in kwargs:
+            try:
+                check(kwargs.pop(name))
+            except ValueError as err:
+                raise ConfigError(f"env_kwargs.{err}") from None
     try:
         make_core(1, **kwargs)
     except ConfigError as err:

@@ -11,7 +11,19 @@ per frame. At an episode's start, before ``frame_stack`` observations exist, Vec
 zeros *after* normalisation; feed ``frame_fill`` there (stored in the ONNX metadata, the
 normalisation's mean, which the graph maps to exactly those zeros). With
 ``action_mode="residual"`` the output is the residual the environment adds to the classical
-WSP's request (``env.py``): the embedded WSP runs the classical logic beside the network.
+WSP's request (``env.py``): the embedded WSP runs the classical logic beside the network; with
+``action_mode="slip_target"`` it is each valve's target slip (the environment's mapping), and
+the embedded WSP runs the slip-target inner loop (``baselines.slip_target``) beside it; with
+``memory_features`` the embedded WSP computes those inputs as the environment does
+(``BrakingCore.memory_obs``).
+
+The ONNX metadata carries what rebuilding the inputs and using the output takes:
+``env_kwargs`` (the model's environment settings, ``action_repeat`` included) and ``inputs``
+(``input_spec``: the settings as the environment resolves them, defaults filled in — the
+decision period, the observation's layout and scales, the memory features' scales and
+definitions' constants, the vehicle's brake constants the energy estimate uses, the residual's
+or the slip-target loop's settings with the classical WSP thresholds of the sensor tier they
+run on).
 
 Supported: PPO and A2C with a continuous (Box) action space and MLP features. SAC/TD3/TQC
 actors, discrete valve modes and recurrent policies are refused with one line.
@@ -100,7 +112,8 @@ def export_onnx(model_path: str | Path, out_path: str | Path) -> dict[str, Any]:
         "policy": policy.name,
         "frame_stack": str(policy.n_stack),
         "obs_dim": str(dim // policy.n_stack),
-        "env_kwargs": json.dumps(policy.env_kwargs),
+        "env_kwargs": json.dumps({**policy.env_kwargs, "action_repeat": policy.action_repeat}),
+        "inputs": json.dumps(input_spec(policy)),
         "vehicle": str(policy.vehicle),
         "frame_fill": json.dumps([float(x) for x in frame_fill[: dim // policy.n_stack]]),
     }
@@ -110,6 +123,75 @@ def export_onnx(model_path: str | Path, out_path: str | Path) -> dict[str, Any]:
     onnx.save(graph, str(tmp))
     tmp.replace(out)
     return {"onnx": str(out), "inputs": dim, **meta, **onnx_latency(out, dim)}
+
+
+def input_spec(policy: SB3Policy) -> dict[str, Any]:
+    """What an embedded WSP needs besides the graph to build its inputs and use its output, as
+    the environment of ``policy``'s settings resolves them (the ONNX metadata's ``inputs``)."""
+    import dataclasses
+
+    from wsp_env.core import braking as B
+    from wsp_env.core import kernel as K
+    from wsp_env.envs import make_core
+    from wsp_env.physics import layout as L
+
+    kwargs = dict(policy.env_kwargs)
+    if policy.vehicle is not None:
+        kwargs["vehicle"] = policy.vehicle
+    core = make_core(1, **kwargs)
+    par, env_par, axle_par = core.obs_par, core.sim.env_par[0], core.sim.axle_par[0]
+    tier = "wheels+accel" if core.accelerometer else "wheels"
+    period = float(core.sim.control_period_s)
+    spec: dict[str, Any] = {
+        "vehicle": core.vehicle.id,
+        "action_mode": core.action_mode,
+        "n_axles": core.n_axles,
+        "valve_of_axle": [int(v) for v in core.valve_of_axle],
+        "control_period_s": period,
+        "action_repeat": policy.action_repeat,
+        "decision_period_s": period * policy.action_repeat,
+        "obs_dim": core.obs_dim,
+        "kernel_obs_dim": core.kernel_obs_dim,
+        "obs_clip": float(K.OBS_CLIP),
+        "speed_scale_mps": float(par[K.OP_SPEED_SCALE]),
+        "decel_scale_mps2": float(par[K.OP_DECEL_SCALE]),
+        "age_scale_s": float(par[K.OP_AGE_SCALE]),
+        "privileged": bool(core.privileged),
+        "accelerometer": bool(core.accelerometer),
+        "sensor_tier": tier,
+    }
+    if core.memory_features:
+        spec["memory_features"] = {
+            "order": ["slide_s", "since_release_s", "energy_MJ"],  # n_axles entries each
+            "time_scale_s": B.MEMORY_TIME_SCALE_S,
+            "energy_scale_MJ": B.MEMORY_ENERGY_SCALE_MJ,
+            "slide_threshold_mps": float(env_par[L.EP_SLIDE_THRESH]),
+            "slide_threshold_rel": float(env_par[L.EP_SLIDE_REL]),
+            "release_fraction": float(par[K.OP_WD_RELEASE_FRACTION]),
+            "brake_gain_Nm_per_bar": [float(x) for x in axle_par[:, L.AP_BRAKE_GAIN]],
+            "brake_threshold_bar": [float(x) for x in axle_par[:, L.AP_P_THRESH]],
+            "wheel_radius_m": [float(x) for x in axle_par[:, L.AP_RADIUS]],
+            "pad_slope_per_mps": float(env_par[L.EP_PAD_SLOPE]),
+            "pad_ref_speed_mps": float(env_par[L.EP_PAD_VREF]),
+        }
+    if core.loop is not None:
+        loop = core.loop
+        spec["slip_target"] = {
+            "min_kmh": core.slip_target_min_kmh,
+            "max_kmh": core.slip_target_max_kmh,
+            "gain_per_kmh": loop.gain_per_kmh,
+            "lead_s": loop.lead_s,
+            "tier": tier,
+            "wsp": dataclasses.asdict(loop.cfg),
+        }
+    if core.base is not None:
+        spec["residual"] = {
+            "scale": core.residual_scale,
+            "deadband": core.residual_deadband,
+            "tier": tier,
+            "wsp": dataclasses.asdict(core.base.cfg),
+        }
+    return spec
 
 
 def onnx_latency(path: str | Path, dim: int, calls: int = 2000) -> dict[str, float]:

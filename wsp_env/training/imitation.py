@@ -87,8 +87,10 @@ def pretrain(model: Any, env: Any, core: Any, cfg: PretrainConfig, gamma: float)
     teacher = make_teacher(cfg.teacher)
     teacher.bind(core)
     n = core.n_envs
-    teacher.reset(np.arange(n))
     obs = env.reset()
+    # after the reset: with staggered resets (``stagger_reset_steps``) it drives every stop
+    # some way in, and a teacher's memory must start with the stop it then takes over
+    teacher.reset(np.arange(n))
     # normalisation statistics on teacher-driven states: whole stops (every environment has
     # finished warmup_episodes), and at least warmup_steps
     finished = np.zeros(n, dtype=np.int64)

@@ -1,0 +1,241 @@
+"""The slip-target inner loop: each valve's target sliding speed, tracked every control period
+from what the sensors measure (the environment's ``action_mode="slip_target"``).
+
+A learner that commands the valves directly acts every 20 ms on pneumatics that answer in
+100 ms and more, so most of its exploration is filtered out; a WSP engineer's controller works a
+level up, on the slip it wants each axle to run at. This loop turns that target into valve
+commands, batched over environments, reading **only the observation** (the kernel's part:
+what the sensor model measures) — exactly as the classical WSP (``classical.py``) does:
+
+* measured slip ``s_i = v_ref - v_i`` (m/s): the shared estimator's reference speed less the
+  wheel-speed reading, never the true train speed or creepage;
+* a lead on the measured slip's rate: ``s_hat_i = s_i + lead_s (d_i - d_ref)``, ``d_i`` the
+  wheel's measured deceleration over the last period (m/s^2), ``d_ref`` the reference speed's
+  (its fall over the period, in the loop's state: kept through a re-anchor, where the reference
+  jumps to a wheel, and held within [0, the estimator's deceleration limit]), so the slip
+  ``lead_s`` ahead if it goes on growing as it did. A slip held steady has no lead term, so the
+  loop settles on the target itself: the median measured slip mid-stop is 3.86-3.98 km/h for a
+  4 km/h target on soap (0.07 at 120 km/h, 0.05 at 160, 0.08 at 60; 1.74-1.95 for 2 km/h,
+  5.84-5.99 for 6; ``scripts/slip_target_study.py --part slip``, wheels-tier sensors, six
+  seeds). A lead on the
+  wheel's absolute deceleration would settle ``lead_s`` times the train's deceleration below it
+  (3.55 km/h at 0.9 m/s^2). The pneumatics' lag is the reason for the lead: the valve's dead
+  time plus the vent's time constant are about 0.1 s (``configs/vehicles``: ``vent_tau_s``
+  0.12 s), and a wheel that starts to slide on soap passes a few km/h of slip in that time. It
+  is the classical WSP's deceleration criterion (``decel_vent_mps2``: a wheel slowing fast is
+  about to slide) made continuous. Without it the loop overshoots into long slides: on those
+  three soap stops (two seeds each) a 4 km/h target stops 9-13 % longer than the classical WSP
+  with ``lead_s = 0`` and 1-4 % shorter with 0.1 s at the default gain (0.2 s ties, 0.05 s lies
+  between; at 0.1 s a gain of 0.1 per km/h gives 0-2 % shorter, 0.4 2-4 %: ``--part lead``);
+* a proportional law on the pressure fraction: valve ``j``'s axles ask for
+  ``f_i = clip(p_i / p_d + gain_per_kmh (target_kmh - 3.6 s_hat_i), 0, 1)`` of the demand
+  ``p_d``, ``p_i`` the observed cylinder pressure. ``p_i / p_d`` is the classical WSP's *hold*
+  (keep the pressure there), so a slip on target holds, a slip below it fills, a slip above it
+  vents, each in proportion; the cylinder's own fill and vent lags integrate the request. With
+  the default 0.2 per km/h, 5 km/h of error swings the request over the whole demand;
+* the classical WSP's recovery rule: an axle re-accelerating faster than ``accel_hold_mps2``
+  is not vented further (it is on its way back), at most held;
+* below ``min_speed_kmh`` the full demand (the classical WSP's rule: the last metres);
+* **periodic release**, as the classical WSP makes it (its ``periodic_release_*`` thresholds,
+  ``release_accel_done_mps2``): an axle held at a target slip never rolls freely, so the shared
+  reference speed has nothing to anchor on and falls at its slope below the train — the measured
+  slip then understates the true one and the wheels lock while their *measured* slip is on
+  target (a 4 km/h target on soap 0.07 at 120 km/h without it: a wheel locked for 8-16 s in
+  each of six stops, against under 0.8 s with it: ``--part release``). So when the reference
+  has gone ``periodic_release_interval_s`` without an anchor (its observed age) and as long
+  since the last release began, one axle in turn, from the last, is vented for at least
+  ``periodic_release_duration_s`` and on until it stops spinning up and the estimator has
+  anchored on it, at most ``periodic_release_max_s``;
+* a valve of several axles (bogie valves) asks for its most cautious axle's request.
+
+The commands are continuous valve actions (``2 f - 1``), so the loop can drive any continuous
+environment from outside (``SlipTargetPolicy``: a constant target) and gives, bit for bit, the
+stop the environment's ``slip_target`` mode gives (``tests/test_slip_target.py``).
+
+State: the periodic release's and the reference's deceleration (``advance``, once per control
+period; ``reset`` starts both anew for an environment's new stop); ``command`` is a pure
+function of the observation, the targets and that state.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from wsp_env.baselines.classical import WSPConfig
+from wsp_env.core import kernel as K
+from wsp_env.core.config import check_number
+
+
+def check_loop_args(gain_per_kmh: Any, lead_s: Any) -> tuple[float, float]:
+    """The loop's gain and lead as floats, or a one-line ``ConfigError`` (a ``ValueError``)
+    naming the environment argument: ``slip_target_gain_per_kmh`` in (0, 10],
+    ``slip_target_lead_s`` in [0, 1] s."""
+    gain = check_number(gain_per_kmh, "slip_target_gain_per_kmh", gt=0.0, le=10.0)
+    return gain, check_number(lead_s, "slip_target_lead_s", ge=0.0, le=1.0)
+
+
+class SlipTargetLoop:
+    """Valve commands that track per-valve target sliding speeds (module docstring). ``wsp``:
+    the classical WSP's thresholds it reuses (recovery, minimum speed, periodic release; the
+    frozen file of the sensor tier in the environment, ``envs.make_core``)."""
+
+    name = "slip_target_loop"
+    privileged = False
+
+    def __init__(
+        self, wsp: WSPConfig | None = None, gain_per_kmh: float = 0.2, lead_s: float = 0.1
+    ) -> None:
+        self.cfg = wsp or WSPConfig()
+        self.gain_per_kmh, self.lead_s = check_loop_args(gain_per_kmh, lead_s)
+
+    def bind(self, core: Any) -> None:
+        """Attach to a ``BrakingCore``: its scales, valve map and batch size."""
+        n, na = core.n_envs, core.n_axles
+        self.n_axles = na
+        self.dt = core.sim.control_period_s
+        self.v_scale = core.obs_par[K.OP_SPEED_SCALE]
+        self.a_scale = core.obs_par[K.OP_DECEL_SCALE]
+        self.age_scale = core.obs_par[K.OP_AGE_SCALE]
+        self.age_index = core.kernel_obs_dim - 1  # the reference's age: the kernel's last entry
+        self.valve_of_axle = core.valve_of_axle
+        self.valve_starts = np.flatnonzero(np.r_[True, np.diff(self.valve_of_axle) != 0])
+        self.since_release = np.full(n, np.inf)  # s since the last periodic release began
+        self.release_left = np.zeros(n)  # s of the minimum release still to run
+        self.release_time = np.zeros(n)  # s the current release has lasted
+        self.releasing = np.zeros(n, dtype=bool)
+        self.release_axle = np.zeros(n, dtype=np.int64)
+        self.next_release = np.full(n, na - 1, dtype=np.int64)
+        self.vent = np.zeros((n, na), dtype=bool)  # this period's periodic-release vents
+        # the reference's deceleration over the last period (m/s^2; NaN: no period yet), its
+        # speed and age then (the lead's relative term, ``advance``)
+        self.ref_limit = float(core.obs_par[K.OP_REF_DECEL_LIMIT])
+        self.decel_ref = np.zeros(n)
+        self.prev_ref = np.full(n, np.nan)
+        self.prev_age = np.zeros(n)
+        self._rows = np.arange(n)
+
+    def reset(self, env_ids: np.ndarray) -> None:
+        """Environments ``env_ids`` start a new stop."""
+        self.since_release[env_ids] = np.inf
+        self.release_left[env_ids] = 0.0
+        self.release_time[env_ids] = 0.0
+        self.releasing[env_ids] = False
+        self.next_release[env_ids] = self.n_axles - 1  # the last axle first
+        self.vent[env_ids] = False
+        self.decel_ref[env_ids] = 0.0
+        self.prev_ref[env_ids] = np.nan
+        self.prev_age[env_ids] = 0.0
+
+    # bound once (``bind``); every other array evolves (``state_dict``)
+    _CONSTANT = frozenset({"valve_of_axle", "valve_starts", "_rows"})  # and ref_limit, a float
+
+    def state_dict(self) -> dict[str, np.ndarray]:
+        """Copies of the evolving state (a checkpointed run resumes bit for bit)."""
+        return {
+            k: v.copy()
+            for k, v in vars(self).items()
+            if isinstance(v, np.ndarray) and k not in self._CONSTANT
+        }
+
+    def load_state_dict(self, state: dict[str, np.ndarray]) -> None:
+        for k, v in state.items():
+            setattr(self, k, v.copy())
+
+    def advance(self, obs: np.ndarray) -> None:
+        """One control period of the loop's state on the kernel's observation ``obs``
+        (``(n_envs, kernel_obs_dim)``): the reference's deceleration over the period and the
+        periodic release. Call it exactly once per period, before ``command``."""
+        cfg, na, dt = self.cfg, self.n_axles, self.dt
+        decel = obs[:, na : 2 * na].astype(np.float64) * self.a_scale
+        age = obs[:, self.age_index].astype(np.float64) * self.age_scale
+        # the reference's deceleration over the period: kept through a re-anchor (its age fell:
+        # the reference jumped to a wheel, up or down, which is no deceleration of the train)
+        # and within [0, the estimator's limit] (what a braking train does)
+        v_ref = obs[:, 4 * na + 1].astype(np.float64) * self.v_scale
+        slope = (self.prev_ref - v_ref) / dt
+        known = np.isfinite(slope) & (age >= self.prev_age)
+        self.decel_ref = np.where(known, np.clip(slope, 0.0, self.ref_limit), self.decel_ref)
+        self.prev_ref, self.prev_age = v_ref, age
+        self.since_release += dt
+        start = (
+            (age > cfg.periodic_release_interval_s)
+            & (self.since_release > cfg.periodic_release_interval_s)
+            & ~self.releasing
+        )
+        if start.any():
+            self.release_axle[start] = self.next_release[start]
+            self.next_release[start] = (self.next_release[start] - 1) % na
+            self.release_left[start] = cfg.periodic_release_duration_s
+            self.release_time[start] = 0.0
+            self.releasing |= start
+            self.since_release[start] = 0.0
+        self.vent[...] = False
+        if self.releasing.any():
+            rows = self._rows[self.releasing]
+            axle = self.release_axle[self.releasing]
+            # at least the minimum time, then until the wheel no longer spins up and the
+            # estimator has anchored on it (the observed age fell below the release's time)
+            still = (
+                (self.release_left[self.releasing] > 0)
+                | (-decel[rows, axle] > cfg.release_accel_done_mps2)
+                | (age[rows] >= self.release_time[self.releasing])
+            )
+            still &= self.release_time[self.releasing] < cfg.periodic_release_max_s
+            self.vent[rows[still], axle[still]] = True
+            self.release_left[rows] -= dt
+            self.release_time[rows] += dt
+            self.releasing[rows[~still]] = False
+
+    def command(self, obs: np.ndarray, target_kmh: np.ndarray) -> np.ndarray:
+        """Valve actions ``(n_envs, n_valves)`` (float64 in [-1, 1], the continuous action
+        space) that track ``target_kmh`` (``(n_envs, n_valves)``, km/h of measured slip) on the
+        kernel's observation ``obs``; pure: the state as ``advance`` left it."""
+        cfg, na = self.cfg, self.n_axles
+        v = obs[:, :na].astype(np.float64) * self.v_scale
+        decel = obs[:, na : 2 * na].astype(np.float64) * self.a_scale
+        pressure = obs[:, 3 * na : 4 * na].astype(np.float64)  # / p_max
+        demand = obs[:, 4 * na].astype(np.float64)[:, None]  # / p_max
+        v_ref = obs[:, 4 * na + 1].astype(np.float64)[:, None] * self.v_scale
+        # the measured slip a lead ahead: its rate is the wheel's deceleration less the
+        # reference's (``advance``), so a slip held on target has no lead term
+        slip_ahead = (v_ref - v) + self.lead_s * (decel - self.decel_ref[:, None])  # m/s
+        hold = np.where(demand > 1e-6, pressure / np.maximum(demand, 1e-6), 1.0)
+        target = np.asarray(target_kmh, dtype=np.float64)[:, self.valve_of_axle]
+        frac = hold + self.gain_per_kmh * (target - 3.6 * slip_ahead)
+        frac = np.where(-decel > cfg.accel_hold_mps2, np.maximum(frac, hold), frac)
+        frac = np.clip(frac, 0.0, 1.0)
+        frac[self.vent] = 0.0
+        frac[v_ref[:, 0] < cfg.min_speed_kmh / 3.6] = 1.0
+        valve = np.minimum.reduceat(frac, self.valve_starts, axis=1)
+        return 2.0 * valve - 1.0
+
+    def act(self, obs: np.ndarray, target_kmh: np.ndarray) -> np.ndarray:
+        """``advance`` then ``command``: one control period from outside an environment."""
+        self.advance(obs)
+        return self.command(obs, target_kmh)
+
+
+class SlipTargetPolicy:
+    """A constant target sliding speed on every valve, tracked by ``SlipTargetLoop``: a policy
+    (``bind`` / ``reset`` / ``act``) for any continuous-action environment, reading the kernel's
+    part of the observation."""
+
+    privileged = False
+
+    def __init__(self, target_kmh: float, loop: SlipTargetLoop | None = None) -> None:
+        self.target_kmh = float(target_kmh)
+        self.loop = loop or SlipTargetLoop()
+        self.name = f"slip_target_{self.target_kmh:g}kmh"
+
+    def bind(self, core: Any) -> None:
+        self.loop.bind(core)
+        self.width = core.kernel_obs_dim
+        self.target = np.full((core.n_envs, core.n_valves), self.target_kmh)
+
+    def reset(self, env_ids: np.ndarray) -> None:
+        self.loop.reset(env_ids)
+
+    def act(self, obs: np.ndarray) -> np.ndarray:
+        return self.loop.act(obs[:, : self.width], self.target)
