@@ -68,7 +68,7 @@ def test_a_first_order_lag_is_found_as_one_and_explains_the_balance(tmp_path, se
     (taken at the value the wheels read for it, short of the filter's mean delay) cut the
     balance by about a third. The loop now fits the time constant in the shape the wheels show;
     the balance alone cannot tell the two shapes (it integrates the force: either explains it
-    as well as the other, within 3 %). The constant is set on the balance within twice the
+    as well as the other, within 8 %). The constant is set on the balance within twice the
     wheels' reading (``balance_effects.WHEEL_WINDOW``), which keeps the ground speed's own lag
     out of it at some cost to the cut (seed 5: the wheels read 0.19 s, the balance's free best
     is 0.40 s, the window's 0.36 s leaves 1.4 times its error)."""
@@ -87,6 +87,23 @@ def test_a_first_order_lag_is_found_as_one_and_explains_the_balance(tmp_path, se
     )
     assert lag.after <= 1.5 * free
     assert 1.0 - lag.after / lag.before > 0.6
+
+
+@pytest.mark.parametrize("seed", [1, 3, 4])
+def test_the_balance_cannot_tell_the_shapes(tmp_path, seed):
+    """A 0.3 s first-order lag: the best dead time and the best time constant on the balance's
+    grids leave its error within 8 % of each other (seed 3: 7.5 %, the widest of 11 traces;
+    9 of 11 within 3 %), at a mean delay near the constant: the balance integrates the brake
+    force, so it sees the delay, not the shape."""
+    trace, _, _ = independent_trace(tmp_path, seed, [("pressure_time_constant", 0.3)])
+    ch = channels(trace)["train_speed_balance_kmh"]
+    rmse, value = {}, {}
+    for f in (fit_lag, fit_time_constant):
+        params, res = f(trace, ch.residual, ch.mask)
+        rmse[f] = float(np.sqrt(np.mean(res[ch.mask] ** 2)))
+        value[f] = next(iter(params.values()))
+    assert max(rmse.values()) <= 1.08 * min(rmse.values())
+    assert all(0.2 <= v <= 0.7 for v in value.values())
 
 
 def test_a_dead_time_is_still_taken_at_the_wheels_value(tmp_path):
