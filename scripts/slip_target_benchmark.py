@@ -1,0 +1,48 @@
+"""Constant slip targets on the benchmark's sealed set: what the slip-target inner loop alone
+gives, the baseline a policy trained in ``action_mode="slip_target"`` must beat (issue 23).
+
+Each ``--target`` is a ``baselines.slip_target.SlipTargetPolicy`` (every valve asks for that
+measured sliding speed, tracked every 20 ms by the same ``SlipTargetLoop`` the environment's
+mode uses), scored through ``evaluation.benchmark.run_benchmark`` like any other controller:
+the same stops, sensors, watchdog and score.
+
+    .venv/bin/python scripts/slip_target_benchmark.py --tier wheels+accel --target 4.25 \\
+        [--target 2 --target 6] [--runs 300] [--json runs/bench/slip_constant.json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from wsp_env.baselines.slip_target import SlipTargetPolicy
+from wsp_env.cli.printing import print_benchmark
+from wsp_env.evaluation.benchmark import SEALED_RUNS, run_benchmark
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--tier", default="wheels+accel", choices=("wheels", "wheels+accel"))
+    ap.add_argument("--target", type=float, action="append", help="km/h, repeatable")
+    ap.add_argument("--runs", type=int, default=SEALED_RUNS)
+    ap.add_argument("--json", dest="json_path", default=None)
+    args = ap.parse_args(argv)
+    targets = args.target or [4.25]
+    if any(not 0.0 <= t <= 30.0 for t in targets):
+        print("--target: a sliding speed in [0, 30] km/h", file=sys.stderr)
+        return 2
+    policies = [SlipTargetPolicy(t) for t in targets]
+    result = run_benchmark(policies, tier=args.tier, runs=args.runs, keep_runs=False,
+                           progress=lambda m: print(m, file=sys.stderr))  # fmt: skip
+    print_benchmark(result)
+    if args.json_path:
+        path = Path(args.json_path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(result, indent=1, default=float))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
