@@ -364,3 +364,27 @@ def test_training_config_and_trained_model_carry_the_mode(tmp_path):
     assert (loop["min_kmh"], loop["max_kmh"], loop["lead_s"]) == (0.5, 6.0, 0.05)
     assert loop["gain_per_kmh"] == 0.2 and loop["tier"] == "wheels"
     assert loop["wsp"] == dataclasses.asdict(load_wsp_config(tier="wheels"))
+
+
+def test_constant_targets_are_scored_on_the_sealed_set_like_any_controller(tmp_path, capsys):
+    """``scripts/slip_target_benchmark.py``: a constant target goes through ``run_benchmark``
+    (the same stops, sensors, watchdog and score as every controller), on a tiny slice of the
+    sealed set; a target out of range is one line."""
+    import json
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "scripts"))
+    try:
+        import slip_target_benchmark as stb
+    finally:
+        sys.path.pop(0)
+    out = tmp_path / "b.json"
+    assert stb.main(["--target", "4.25", "--runs", "4", "--json", str(out)]) == 0
+    result = json.loads(out.read_text())
+    assert result["runs"] == 4 and not result["sealed"]
+    p = result["policies"]["slip_target_4.25kmh"]
+    assert set(result["policies"]) == {"none", "classical", "slip_target_4.25kmh"}
+    assert p["score"] is not None and 0.0 < p["score"] < 2.0  # between locked wheels and beyond
+    assert "slip_target_4.25kmh" in capsys.readouterr().out
+    assert stb.main(["--target", "-1"]) == 2
