@@ -16,7 +16,10 @@ Channels and their candidates (categories of DESIGN §8):
 * train-speed balance — ``gradient`` (constant force ``M g theta``), ``running_resistance``
   (``dA + dC V^2``), ``pad_friction`` (brake force x ``(k0 + k1 (V - 100 km/h))``),
   ``unmeasured_brake_force`` (a force following the brake demand), ``pressure_lag`` (the brake
-  force follows the logged pressure ``tau`` later), ``sensor`` (ground-speed scale error);
+  force follows the logged pressure ``tau`` later, through a first-order lag, or both: the
+  wheels name the shape, ``wheel_lag``; where they cannot, a dead time stands against a
+  constant of the same mean delay, which is named as the other form), ``sensor`` (ground-speed
+  scale error);
 * coasting creep — ``wheel_radius`` (one radius error per axle), ``sensor`` (one scale error for
   the ground speed, seen by every axle alike);
 * adhesion fit — ``adhesion_per_axle`` (a friction factor per axle), ``load_transfer`` (bogie
@@ -62,10 +65,12 @@ ground-speed lag waits until it is in; where they show the brake on time, the ba
 no pressure lag.
 
 Choice: the channel with the largest relative RMSE cut goes first; on it, candidates whose
-remaining error lies within half a noise floor of the best count as equally good, and the one
-with the fewest parameters wins — a constant force is a gradient before it is a running
-resistance with a spare term (logged samples are strongly correlated, so the BIC's penalty
-alone would let a spare parameter through).
+remaining error lies within half a noise floor of the best count as equally good (the result
+says so: ``Step.ambiguous``, each alternative's fit and the measurement that would separate
+them, ``selection.separating_measurement``), and the one with the fewest parameters wins — a
+constant force is a gradient before it is a running resistance with a spare term (logged
+samples are strongly correlated, so the BIC's penalty alone would let a spare parameter
+through).
 
 Where the pieces live: the BIC, the shared gates and the records (``Candidate``, ``Step``,
 ``Result``) in ``selection``; the balance channel's fits, lags and the logger's timing in
