@@ -93,7 +93,92 @@ def load_wsp_config(path: str | Path | None = None, tier: str = "wheels") -> WSP
         raise ConfigError(f"{p}: {err}") from None
 
 
-class ClassicalWSP:
+class ArrayState:
+    """``state_dict`` / ``load_state_dict`` for a batched controller whose evolving state is
+    its numpy arrays: every array attribute except those named in ``_CONSTANT`` (bound once)."""
+
+    _CONSTANT: frozenset[str] = frozenset()
+
+    def state_dict(self) -> dict[str, np.ndarray]:
+        """Copies of the evolving state (a checkpointed run resumes bit for bit)."""
+        return {
+            k: v.copy()
+            for k, v in vars(self).items()
+            if isinstance(v, np.ndarray) and k not in self._CONSTANT
+        }
+
+    def load_state_dict(self, state: dict[str, np.ndarray]) -> None:
+        for k, v in state.items():
+            setattr(self, k, v.copy())
+
+
+class PeriodicRelease:
+    """The periodic release (module docstring) as state of a batched controller: when the
+    reference has gone ``periodic_release_interval_s`` without an anchor, and as long since the
+    last release began, one axle in turn from the last is released for at least
+    ``periodic_release_duration_s`` and on until it stops spinning up and the estimator has
+    anchored on it, at most ``periodic_release_max_s``. Shared by the classical WSP and the
+    slip-target loop (``slip_target``); needs ``cfg`` (``WSPConfig``) and ``_rows``."""
+
+    cfg: WSPConfig
+    _rows: np.ndarray
+
+    def _release_init(self, n: int, next_axle: int = 0) -> None:
+        self.since_release = np.zeros(n)  # s since the last periodic release began
+        self.release_left = np.zeros(n)  # s of the minimum periodic release still to run
+        self.release_time = np.zeros(n)  # s the current periodic release has lasted
+        self.releasing = np.zeros(n, dtype=bool)
+        self.release_axle = np.zeros(n, dtype=np.int64)
+        self.next_release = np.full(n, next_axle, dtype=np.int64)
+
+    def _release_reset(self, env_ids: np.ndarray, n_axles: int) -> None:
+        self.since_release[env_ids] = np.inf
+        self.release_left[env_ids] = 0.0
+        self.release_time[env_ids] = 0.0
+        self.releasing[env_ids] = False
+        self.next_release[env_ids] = n_axles - 1  # the last axle first
+
+    def _release_step(
+        self, age: np.ndarray, decel: np.ndarray, dt: float, allowed: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Advance the release by one period (``age``: the reference's, s, per env; ``decel``:
+        per axle, m/s^2; ``allowed``: envs where a release may begin); returns the (env, axle)
+        pairs to vent this period."""
+        cfg, na = self.cfg, decel.shape[1]
+        self.since_release += dt
+        start = (
+            (age > cfg.periodic_release_interval_s)
+            & (self.since_release > cfg.periodic_release_interval_s)
+            & ~self.releasing
+        )
+        if allowed is not None:
+            start &= allowed
+        if start.any():
+            self.release_axle[start] = self.next_release[start]
+            self.next_release[start] = (self.next_release[start] - 1) % na
+            self.release_left[start] = cfg.periodic_release_duration_s
+            self.release_time[start] = 0.0
+            self.releasing |= start
+            self.since_release[start] = 0.0
+        if not self.releasing.any():
+            return self._rows[:0], self._rows[:0]
+        rows = self._rows[self.releasing]
+        axle = self.release_axle[self.releasing]
+        # at least the minimum time, then until the wheel has stopped spinning up and the
+        # estimator has anchored on it (the observed age fell below the release's time)
+        still = (
+            (self.release_left[self.releasing] > 0)
+            | (-decel[rows, axle] > cfg.release_accel_done_mps2)
+            | (age[rows] >= self.release_time[self.releasing])
+        )
+        still &= self.release_time[self.releasing] < cfg.periodic_release_max_s
+        self.release_left[rows] -= dt
+        self.release_time[rows] += dt
+        self.releasing[rows[~still]] = False
+        return rows[still], axle[still]
+
+
+class ClassicalWSP(ArrayState, PeriodicRelease):
     """The classical WSP as a batched policy (see the module docstring)."""
 
     name = "classical"
@@ -121,12 +206,7 @@ class ClassicalWSP:
         self.step_clock = np.zeros((n, na))  # s into the current fill/hold pulse
         self.slide_pressure = np.zeros((n, na))  # / p_max, when the last vent began
         self.active = np.zeros(n, dtype=bool)  # some axle out of apply in the last period
-        self.since_release = np.zeros(n)  # s since the last periodic release began
-        self.release_left = np.zeros(n)  # s of the minimum periodic release still to run
-        self.release_time = np.zeros(n)  # s the current periodic release has lasted
-        self.releasing = np.zeros(n, dtype=bool)
-        self.release_axle = np.zeros(n, dtype=np.int64)
-        self.next_release = np.zeros(n, dtype=np.int64)
+        self._release_init(n)
         self._rows = np.arange(n)
 
     def reset(self, env_ids: np.ndarray) -> None:
@@ -136,26 +216,10 @@ class ClassicalWSP:
         self.step_clock[env_ids] = 0.0
         self.slide_pressure[env_ids] = 0.0
         self.active[env_ids] = False
-        self.since_release[env_ids] = np.inf
-        self.release_left[env_ids] = 0.0
-        self.release_time[env_ids] = 0.0
-        self.releasing[env_ids] = False
-        self.next_release[env_ids] = self.n_axles - 1  # the last axle first
+        self._release_reset(env_ids, self.n_axles)
 
     # bound once (``bind``); everything else that is an array evolves (``state_dict``)
     _CONSTANT = frozenset({"p_max", "valve_of_axle", "valve_starts", "_rows"})
-
-    def state_dict(self) -> dict[str, np.ndarray]:
-        """Copies of the evolving state (a checkpointed residual-mode run resumes bit for bit)."""
-        return {
-            k: v.copy()
-            for k, v in vars(self).items()
-            if isinstance(v, np.ndarray) and k not in self._CONSTANT
-        }
-
-    def load_state_dict(self, state: dict[str, np.ndarray]) -> None:
-        for k, v in state.items():
-            setattr(self, k, v.copy())
 
     def act(self, obs: np.ndarray) -> np.ndarray:
         cfg, na, dt = self.cfg, self.n_axles, self.dt
@@ -179,35 +243,8 @@ class ClassicalWSP:
         # anchor, release one axle now and then so that it spins up to the train speed and the
         # estimator anchors on it
         self.active = (state != APPLY).any(axis=1)
-        self.since_release += dt
-        start = (
-            (age > cfg.periodic_release_interval_s)
-            & (self.since_release > cfg.periodic_release_interval_s)
-            & ~self.releasing
-            & self.active
-        )
-        if start.any():
-            self.release_axle[start] = self.next_release[start]
-            self.next_release[start] = (self.next_release[start] - 1) % na
-            self.release_left[start] = cfg.periodic_release_duration_s
-            self.release_time[start] = 0.0
-            self.releasing |= start
-            self.since_release[start] = 0.0
-        if self.releasing.any():
-            rows = self._rows[self.releasing]
-            axle = self.release_axle[self.releasing]
-            # run at least the minimum time, then until the wheel has stopped spinning up and
-            # the estimator has anchored on it (the observed age fell below the release's time)
-            still = (
-                (self.release_left[self.releasing] > 0)
-                | (-decel[rows, axle] > cfg.release_accel_done_mps2)
-                | (age[rows] >= self.release_time[self.releasing])
-            )
-            still &= self.release_time[self.releasing] < cfg.periodic_release_max_s
-            state[rows[still], axle[still]] = VENT
-            self.release_left[rows] -= dt
-            self.release_time[rows] += dt
-            self.releasing[rows[~still]] = False
+        rows, axles = self._release_step(age, decel, dt, self.active)
+        state[rows, axles] = VENT
         # re-application after a vent: straight back to a share of the pressure the slide began
         # at, then fill pulses separated by holds
         onset = (state == VENT) & (self.venting_for == 0.0)  # a vent begins this period

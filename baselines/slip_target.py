@@ -63,7 +63,7 @@ from typing import Any
 
 import numpy as np
 
-from wsp_env.baselines.classical import WSPConfig
+from wsp_env.baselines.classical import ArrayState, PeriodicRelease, WSPConfig
 from wsp_env.core import kernel as K
 from wsp_env.core.config import check_number
 
@@ -76,7 +76,7 @@ def check_loop_args(gain_per_kmh: Any, lead_s: Any) -> tuple[float, float]:
     return gain, check_number(lead_s, "slip_target_lead_s", ge=0.0, le=1.0)
 
 
-class SlipTargetLoop:
+class SlipTargetLoop(ArrayState, PeriodicRelease):
     """Valve commands that track per-valve target sliding speeds (module docstring). ``wsp``:
     the classical WSP's thresholds it reuses (recovery, minimum speed, periodic release; the
     frozen file of the sensor tier in the environment, ``envs.make_core``)."""
@@ -101,12 +101,8 @@ class SlipTargetLoop:
         self.age_index = core.kernel_obs_dim - 1  # the reference's age: the kernel's last entry
         self.valve_of_axle = core.valve_of_axle
         self.valve_starts = np.flatnonzero(np.r_[True, np.diff(self.valve_of_axle) != 0])
-        self.since_release = np.full(n, np.inf)  # s since the last periodic release began
-        self.release_left = np.zeros(n)  # s of the minimum release still to run
-        self.release_time = np.zeros(n)  # s the current release has lasted
-        self.releasing = np.zeros(n, dtype=bool)
-        self.release_axle = np.zeros(n, dtype=np.int64)
-        self.next_release = np.full(n, na - 1, dtype=np.int64)
+        self._release_init(n, next_axle=na - 1)
+        self.since_release[:] = np.inf
         self.vent = np.zeros((n, na), dtype=bool)  # this period's periodic-release vents
         # the reference's deceleration over the last period (m/s^2; NaN: no period yet), its
         # speed and age then (the lead's relative term, ``advance``)
@@ -118,11 +114,7 @@ class SlipTargetLoop:
 
     def reset(self, env_ids: np.ndarray) -> None:
         """Environments ``env_ids`` start a new stop."""
-        self.since_release[env_ids] = np.inf
-        self.release_left[env_ids] = 0.0
-        self.release_time[env_ids] = 0.0
-        self.releasing[env_ids] = False
-        self.next_release[env_ids] = self.n_axles - 1  # the last axle first
+        self._release_reset(env_ids, self.n_axles)
         self.vent[env_ids] = False
         self.decel_ref[env_ids] = 0.0
         self.prev_ref[env_ids] = np.nan
@@ -131,23 +123,11 @@ class SlipTargetLoop:
     # bound once (``bind``); every other array evolves (``state_dict``)
     _CONSTANT = frozenset({"valve_of_axle", "valve_starts", "_rows"})  # and ref_limit, a float
 
-    def state_dict(self) -> dict[str, np.ndarray]:
-        """Copies of the evolving state (a checkpointed run resumes bit for bit)."""
-        return {
-            k: v.copy()
-            for k, v in vars(self).items()
-            if isinstance(v, np.ndarray) and k not in self._CONSTANT
-        }
-
-    def load_state_dict(self, state: dict[str, np.ndarray]) -> None:
-        for k, v in state.items():
-            setattr(self, k, v.copy())
-
     def advance(self, obs: np.ndarray) -> None:
         """One control period of the loop's state on the kernel's observation ``obs``
         (``(n_envs, kernel_obs_dim)``): the reference's deceleration over the period and the
         periodic release. Call it exactly once per period, before ``command``."""
-        cfg, na, dt = self.cfg, self.n_axles, self.dt
+        na, dt = self.n_axles, self.dt
         decel = obs[:, na : 2 * na].astype(np.float64) * self.a_scale
         age = obs[:, self.age_index].astype(np.float64) * self.age_scale
         # the reference's deceleration over the period: kept through a re-anchor (its age fell:
@@ -158,35 +138,9 @@ class SlipTargetLoop:
         known = np.isfinite(slope) & (age >= self.prev_age)
         self.decel_ref = np.where(known, np.clip(slope, 0.0, self.ref_limit), self.decel_ref)
         self.prev_ref, self.prev_age = v_ref, age
-        self.since_release += dt
-        start = (
-            (age > cfg.periodic_release_interval_s)
-            & (self.since_release > cfg.periodic_release_interval_s)
-            & ~self.releasing
-        )
-        if start.any():
-            self.release_axle[start] = self.next_release[start]
-            self.next_release[start] = (self.next_release[start] - 1) % na
-            self.release_left[start] = cfg.periodic_release_duration_s
-            self.release_time[start] = 0.0
-            self.releasing |= start
-            self.since_release[start] = 0.0
         self.vent[...] = False
-        if self.releasing.any():
-            rows = self._rows[self.releasing]
-            axle = self.release_axle[self.releasing]
-            # at least the minimum time, then until the wheel no longer spins up and the
-            # estimator has anchored on it (the observed age fell below the release's time)
-            still = (
-                (self.release_left[self.releasing] > 0)
-                | (-decel[rows, axle] > cfg.release_accel_done_mps2)
-                | (age[rows] >= self.release_time[self.releasing])
-            )
-            still &= self.release_time[self.releasing] < cfg.periodic_release_max_s
-            self.vent[rows[still], axle[still]] = True
-            self.release_left[rows] -= dt
-            self.release_time[rows] += dt
-            self.releasing[rows[~still]] = False
+        rows, axles = self._release_step(age, decel, dt)
+        self.vent[rows, axles] = True
 
     def command(self, obs: np.ndarray, target_kmh: np.ndarray) -> np.ndarray:
         """Valve actions ``(n_envs, n_valves)`` (float64 in [-1, 1], the continuous action
