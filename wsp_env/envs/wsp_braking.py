@@ -322,31 +322,26 @@ ACTION_REPEAT_MAX = 50
 STAGGER_RESET_MAX = 100_000
 
 
+def _check_int(value: Any, name: str, low: int, high: int) -> int:
+    """``value`` as an int in ``low``-``high``, or a one-line ``ValueError`` naming ``name``."""
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, int | np.integer)
+        or not low <= value <= high
+    ):
+        raise ValueError(f"{name}: must be an integer {low}-{high}, got {value!r}")
+    return int(value)
+
+
 def check_action_repeat(action_repeat: Any) -> int:
     """``action_repeat`` as an int in 1-``ACTION_REPEAT_MAX``, or a one-line ``ValueError``."""
-    if (
-        isinstance(action_repeat, bool)
-        or not isinstance(action_repeat, int | np.integer)
-        or not 1 <= action_repeat <= ACTION_REPEAT_MAX
-    ):
-        raise ValueError(
-            f"action_repeat: must be an integer 1-{ACTION_REPEAT_MAX}, got {action_repeat!r}"
-        )
-    return int(action_repeat)
+    return _check_int(action_repeat, "action_repeat", 1, ACTION_REPEAT_MAX)
 
 
 def check_stagger_reset_steps(steps: Any) -> int:
     """``stagger_reset_steps`` as an int in 0-``STAGGER_RESET_MAX``, or a one-line
     ``ValueError``."""
-    if (
-        isinstance(steps, bool)
-        or not isinstance(steps, int | np.integer)
-        or not 0 <= steps <= STAGGER_RESET_MAX
-    ):
-        raise ValueError(
-            f"stagger_reset_steps: must be an integer 0-{STAGGER_RESET_MAX}, got {steps!r}"
-        )
-    return int(steps)
+    return _check_int(steps, "stagger_reset_steps", 0, STAGGER_RESET_MAX)
 
 
 def _spec_with_limit(spec: EnvSpec | None, max_episode_steps: int) -> EnvSpec | None:
