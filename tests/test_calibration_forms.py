@@ -62,6 +62,28 @@ def test_the_wheels_tell_a_first_order_lag_from_a_dead_time(tmp_path, seed):
     assert dead is not None and dead.shape == "dead_time" and dead.params.keys() == {"lag_s"}
 
 
+@pytest.mark.parametrize("seed", [1014, 1016])
+def test_a_dead_time_and_a_first_order_lag_together_are_read_as_both(tmp_path, seed):
+    """A 0.15 s dead time then a 0.3 s time constant on soap: the wheels read both shapes at
+    once (each part at least their resolution, smoother than either shape alone by the
+    paired per-episode test) and the loop adds one pressure lag with both parameters; the same
+    scenario with one shape is not read as both (``wheel_lag``'s ``_both``). The dead time
+    reads 0.10-0.24 s on independent traces, the constant short (as a first order alone)."""
+    both = [("pressure_lag", 0.15), ("pressure_time_constant", 0.3)]
+    trace, _, _ = independent_trace(tmp_path, seed, both, contaminant="soap")
+    wheels = wheel_lag(trace)
+    assert wheels is not None and wheels.shape == "both"
+    assert 0.1 <= wheels.lag_s <= 0.25 and 0.1 <= wheels.time_constant_s <= 0.45
+    assert wheels.params == {"lag_s": wheels.lag_s, "time_constant_s": wheels.time_constant_s}
+    lag = [s for s in discover(trace).added if s.category == "pressure_lag"]
+    assert len(lag) == 1 and lag[0].parameters.keys() == {"lag_s", "time_constant_s"}
+    assert lag[0].parameters["lag_s"] == pytest.approx(wheels.lag_s)
+    for alone, shape in ((("pressure_lag", 0.2), "dead_time"),
+                         (("pressure_time_constant", 0.3), "first_order")):  # fmt: skip
+        one = wheel_lag(independent_trace(tmp_path, seed, [alone], contaminant="soap")[0])
+        assert one is not None and one.shape == shape
+
+
 @pytest.mark.parametrize("seed", [5, 7])
 def test_a_first_order_lag_is_found_as_one_and_explains_the_balance(tmp_path, seed):
     """What an outside user saw: on a cylinder that fills through a restriction, a dead time

@@ -38,7 +38,7 @@ from wsp_env.calibration.residuals import (
 )
 from wsp_env.calibration.selection import MIN_DELTA_BIC, MIN_REDUCTION, Candidate, Step, bic
 from wsp_env.calibration.traces import Trace
-from wsp_env.calibration.wheel_lag import WheelLag
+from wsp_env.calibration.wheel_lag import RESOLUTION_S, WheelLag
 
 G = 9.80665
 
@@ -218,7 +218,11 @@ def fit_lag_and_time_constant(
 
 
 # the pressure-lag candidates' fits by shape: the wheels name a shape (``wheel_lag``)
-LAG_FITS = {"dead_time": fit_lag, "first_order": fit_time_constant}
+LAG_FITS = {
+    "dead_time": fit_lag,
+    "first_order": fit_time_constant,
+    "both": fit_lag_and_time_constant,
+}
 LAG_FIT_SET = (fit_lag, fit_time_constant, fit_lag_and_time_constant)
 
 
@@ -229,7 +233,7 @@ LAG_FIT_SET = (fit_lag, fit_time_constant, fit_lag_and_time_constant)
 # WHEEL_LAG_Z standard errors from 0, is the brake's; one it measures below WHEEL_LAG_MIN_S by
 # as many standard errors says the brake is on time, whatever the balance's lag is (then a
 # late ground speed).
-WHEEL_LAG_MIN_S = 0.1
+WHEEL_LAG_MIN_S = RESOLUTION_S
 WHEEL_LAG_Z = 3.0
 
 
@@ -248,13 +252,15 @@ WHEEL_WINDOW = 2.0
 
 def wheel_window(wheels: WheelLag) -> list[Shape]:
     """The shapes the balance may fit for a lag the wheels measured (above): their dead time
-    itself, or their time constant up to ``WHEEL_WINDOW`` times it on its grid."""
-    v = float(wheels.lag_s)
-    if wheels.shape != "first_order":
-        return [(v, 0.0)]
+    itself, or their time constant up to ``WHEEL_WINDOW`` times it on its grid; for both
+    shapes at once, their dead time with that window of constants."""
+    if wheels.shape == "dead_time":
+        return [(float(wheels.lag_s), 0.0)]
+    dead, v = (0.0, float(wheels.lag_s)) if wheels.shape == "first_order" else (
+        float(wheels.lag_s), float(wheels.time_constant_s))  # fmt: skip
     grid = TIME_CONSTANT_GRID_S
     vals = sorted({v, *(float(x) for x in grid if v <= x <= v * WHEEL_WINDOW)})
-    return [(0.0, x) for x in vals]
+    return [(dead, x) for x in vals]
 
 
 def fit_lag_in(
@@ -266,9 +272,13 @@ def fit_lag_in(
 
 
 def wheel_verdict(wheels: WheelLag | None) -> str:
-    """``"late"``, ``"on_time"`` or ``"unknown"`` (no slides, or not clear either way)."""
+    """``"late"``, ``"on_time"`` or ``"unknown"`` (no slides, or not clear either way). Both
+    shapes at once are late by their own test: they beat each shape alone, no lag included, by
+    ``wheel_lag.BOTH_Z`` standard errors, with each part at least ``WHEEL_LAG_MIN_S``."""
     if wheels is None:
         return "unknown"
+    if wheels.shape == "both":
+        return "late"
     if wheels.lag_s >= WHEEL_LAG_MIN_S and wheels.lag_s >= WHEEL_LAG_Z * wheels.se_s:
         return "late"
     if wheels.lag_s + WHEEL_LAG_Z * wheels.se_s < WHEEL_LAG_MIN_S:

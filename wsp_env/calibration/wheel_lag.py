@@ -47,7 +47,11 @@ from wsp_env.calibration.traces import Trace
 TAU_GRID_S = np.arange(-0.3, 1.001, 0.02)
 # the first-order time constant's grid (s): none to well beyond a restricted cylinder's filling
 TC_GRID_S = np.arange(0.0, 1.001, 0.02)
-SHAPES = ("dead_time", "first_order")
+# both shapes together: the dead time's grid (s); the constant's is TC_GRID_S
+BOTH_DEAD_GRID_S = np.arange(0.0, 0.401, 0.02)
+SHAPES = ("dead_time", "first_order", "both")
+RESOLUTION_S = 0.1  # the wheels' resolution: a lag (or each part of both) below it is not read
+BOTH_Z = 3.0  # standard errors by which both shapes must beat each shape alone
 SLIDE_KMH = 2.0  # a wheel this much slower than the fastest axle slides (beyond sensor noise)
 # an episode carries timing only if the valve acted in it: the torque moved by this share of
 # the axle's largest (a wheel rolling under a steady brake has nothing to answer)
@@ -60,26 +64,37 @@ MIN_EPISODES = 4  # fewer: no lag is measured (and no standard error could be)
 @dataclass
 class WheelLag:
     """The lag (s) at which the wheels' adhesion force is smoothest — a dead time, or a
-    first-order time constant where ``shape`` is ``"first_order"`` —, its jackknife standard
-    error (s), the number of slide episodes it rests on, and the shape's score curve over its
-    grid (``TAU_GRID_S`` or ``TC_GRID_S``: mean squared change of the force, N^2, per sample
-    pair)."""
+    first-order time constant where ``shape`` is ``"first_order"``, or the dead time where it
+    is ``"both"`` (then the constant is ``time_constant_s``) —, its jackknife standard error
+    (s), the number of slide episodes it rests on, and the shape's score curve over its grid
+    (``TAU_GRID_S`` or ``TC_GRID_S``: mean squared change of the force, N^2, per sample pair;
+    for both, over ``TC_GRID_S`` at the dead time found)."""
 
     lag_s: float
     se_s: float
     episodes: int
     score: np.ndarray
     shape: str = "dead_time"
+    time_constant_s: float = 0.0  # the first-order part where ``shape`` is ``"both"``
 
     @property
     def params(self) -> dict[str, float]:
         """The pressure-lag effect's parameters this lag stands for."""
+        if self.shape == "both":
+            return {"lag_s": self.lag_s, "time_constant_s": self.time_constant_s}
         key = "time_constant_s" if self.shape == "first_order" else "lag_s"
         return {key: self.lag_s}
 
     def as_dict(self) -> dict[str, float | str]:
-        return {"lag_s": self.lag_s, "se_s": self.se_s, "episodes": float(self.episodes),
-                "shape": self.shape}  # fmt: skip
+        out: dict[str, float | str] = {
+            "lag_s": self.lag_s,
+            "se_s": self.se_s,
+            "episodes": float(self.episodes),
+            "shape": self.shape,
+        }
+        if self.shape == "both":
+            out["time_constant_s"] = self.time_constant_s
+        return out
 
 
 def _refined_min(score: np.ndarray, grid: np.ndarray = TAU_GRID_S) -> float:
@@ -129,7 +144,12 @@ def wheel_lag(trace: Trace) -> WheelLag | None:
         )  # (n_tau, T)
         filtered = first_order(t, np.repeat(torque[:, i : i + 1], len(TC_GRID_S), axis=1),
                                TC_GRID_S).T  # (n_tc, T)  # fmt: skip
-        lagged = np.concatenate([lagged, filtered], axis=0)
+        dead = np.stack([np.interp(t - d, t, torque[:, i], left=0.0) for d in BOTH_DEAD_GRID_S],
+                        axis=1)  # (T, n_dead)  # fmt: skip
+        both = first_order(
+            t, np.repeat(dead, len(TC_GRID_S), axis=1), np.tile(TC_GRID_S, len(BOTH_DEAD_GRID_S))
+        ).T  # (n_dead x n_tc, T)
+        lagged = np.concatenate([lagged, filtered, both], axis=0)
         force = inertial[None, :] + lagged / r  # the adhesion force at each lag
         change2 = np.diff(force, axis=1) ** 2  # (n_tau, T-1)
         big = float(torque[:, i].max())
@@ -139,12 +159,15 @@ def wheel_lag(trace: Trace) -> WheelLag | None:
                 per_episode.append(np.concatenate([change2[:, a:b].sum(axis=1), [b - a]]))
     if len(per_episode) < MIN_EPISODES:
         return None
-    table = np.stack(per_episode, axis=0)  # (episodes, n_tau + n_tc + 1): sums, pair counts
+    table = np.stack(per_episode, axis=0)  # (episodes, columns + 1): sums, pair counts
     sums, counts = table[:, :-1], table[:, -1]
     total = sums.sum(axis=0) / counts.sum()
-    n_tau = len(TAU_GRID_S)
-    first = bool(total[n_tau:].min() < total[:n_tau].min())
-    cols = slice(n_tau, None) if first else slice(0, n_tau)
+    n_tau, n_tc = len(TAU_GRID_S), len(TC_GRID_S)
+    both = _both(sums, total, n_tau, n_tc)
+    if both is not None:
+        return both
+    first = bool(total[n_tau : n_tau + n_tc].min() < total[:n_tau].min())
+    cols = slice(n_tau, n_tau + n_tc) if first else slice(0, n_tau)
     grid = TC_GRID_S if first else TAU_GRID_S
     lag = _refined_min(total[cols], grid)
     m = len(table)
@@ -157,4 +180,42 @@ def wheel_lag(trace: Trace) -> WheelLag | None:
     return WheelLag(lag, se, m, total[cols], "first_order" if first else "dead_time")
 
 
-__all__ = ["SHAPES", "TAU_GRID_S", "TC_GRID_S", "WheelLag", "wheel_lag"]
+def _both(sums: np.ndarray, total: np.ndarray, n_tau: int, n_tc: int) -> WheelLag | None:
+    """Both shapes at once where they earn both parameters (module docstring), else ``None``.
+    ``sums``: per-episode sums of squared force changes over the columns dead time, first
+    order, both (dead-time-major); ``total`` their means per sample pair."""
+    two = total[n_tau + n_tc :].reshape(len(BOTH_DEAD_GRID_S), n_tc)
+    k, j = np.unravel_index(int(np.argmin(two)), two.shape)
+    dead_s, tc_s = float(BOTH_DEAD_GRID_S[k]), float(TC_GRID_S[j])
+    if dead_s < RESOLUTION_S or tc_s < RESOLUTION_S:
+        return None
+    col = n_tau + n_tc + k * n_tc + j
+    m = len(sums)
+    for alone in (
+        int(np.argmin(total[:n_tau])),
+        n_tau + int(np.argmin(total[n_tau : n_tau + n_tc])),
+    ):
+        diff = sums[:, alone] - sums[:, col]  # per episode: how much smoother both are
+        spread = float(np.std(diff, ddof=1)) if m > 1 else 0.0
+        if not (diff.sum() > BOTH_Z * np.sqrt(m) * spread and spread > 0.0):
+            return None
+    block = sums[:, n_tau + n_tc :].reshape(m, len(BOTH_DEAD_GRID_S), n_tc)
+    leave_one_out = np.array([
+        BOTH_DEAD_GRID_S[np.unravel_index(int(np.argmin(block.sum(axis=0) - block[e])),
+                                          block.shape[1:])[0]]
+        for e in range(m)
+    ])  # fmt: skip
+    se = float(np.sqrt((m - 1) / m * np.sum((leave_one_out - leave_one_out.mean()) ** 2)))
+    return WheelLag(dead_s, se, m, two[k], "both", tc_s)
+
+
+__all__ = [
+    "BOTH_DEAD_GRID_S",
+    "BOTH_Z",
+    "RESOLUTION_S",
+    "SHAPES",
+    "TAU_GRID_S",
+    "TC_GRID_S",
+    "WheelLag",
+    "wheel_lag",
+]
