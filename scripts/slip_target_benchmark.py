@@ -34,7 +34,8 @@ def main(argv: list[str] | None = None) -> int:
         print("--target: a sliding speed in [0, 30] km/h", file=sys.stderr)
         return 2
     policies = [SlipTargetPolicy(t) for t in targets]
-    result = run_benchmark(policies, tier=args.tier, runs=args.runs, keep_runs=False,
+    result = run_benchmark(policies, tier=args.tier, runs=args.runs,
+                           keep_runs=args.json_path is not None,
                            progress=lambda m: print(m, file=sys.stderr))  # fmt: skip
     print_benchmark(result)
     if args.json_path:

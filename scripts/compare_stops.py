@@ -1,0 +1,58 @@
+"""Two policies stop by stop on the same sealed stops: on how many one returns less than the
+other, and the median return change per rail (metres: the return is minus the stop's cost in
+units of 100 m). Reads the JSON of ``wsp-env benchmark --json`` (which keeps every run) or of
+``scripts/slip_target_benchmark.py --json``; the two files must hold the same stops.
+
+    .venv/bin/python scripts/compare_stops.py runs/exp/bench_const425.json slip_target_4.25kmh \\
+        runs/exp/bench_st_lowstd.json st_lowstd/model
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+import numpy as np
+
+
+def runs_of(path: str, policy: str) -> dict[tuple[str, int], dict]:
+    data = json.loads(open(path, encoding="utf-8").read())
+    runs = data.get("run_results", {})
+    if policy not in runs:
+        raise SystemExit(f"{path}: no runs of policy {policy!r} (has: {', '.join(runs) or 'none'})")
+    return {(r["scenario"], int(r["seed"])): r for r in runs[policy]}
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("base_json")
+    ap.add_argument("base_policy")
+    ap.add_argument("other_json")
+    ap.add_argument("other_policy")
+    args = ap.parse_args(argv)
+    base = runs_of(args.base_json, args.base_policy)
+    other = runs_of(args.other_json, args.other_policy)
+    if base.keys() != other.keys():
+        print("the two files hold different stops", file=sys.stderr)
+        return 2
+    keys = sorted(base)
+    diff = np.array([other[k]["return"] - base[k]["return"] for k in keys])
+    print(
+        f"{args.other_policy} against {args.base_policy} on {len(keys)} stops: returns less "
+        f"on {100 * np.mean(diff < 0):.0f} %, more on {100 * np.mean(diff > 0):.0f} %; "
+        f"median change {100 * np.median(diff):+.1f} m, mean {100 * diff.mean():+.1f} m"
+    )
+    by_rail: dict[str, list[float]] = {}
+    for k, d in zip(keys, diff, strict=True):
+        by_rail.setdefault(str(other[k]["conditions"].get("rail")), []).append(float(d))
+    for rail, ds in sorted(by_rail.items()):
+        print(
+            f"  {rail:14s} n {len(ds):3d}  median {100 * np.median(ds):+7.1f} m  "
+            f"less on {100 * np.mean(np.array(ds) < 0):3.0f} %"
+        )
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,37 @@
+"""scripts/compare_stops.py: two policies stop by stop (the per-stop comparison of
+docs/training.md)."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "scripts"))
+import compare_stops
+
+
+def _write(path: Path, policy: str, returns: list[float], rails: list[str]) -> None:
+    runs = [{"scenario": f"s{i}", "seed": i, "return": r, "conditions": {"rail": rail}}
+            for i, (r, rail) in enumerate(zip(returns, rails, strict=True))]  # fmt: skip
+    path.write_text(json.dumps({"run_results": {policy: runs}}))
+
+
+def test_counts_the_stops_where_one_returns_less_and_the_median_by_rail(tmp_path, capsys):
+    _write(tmp_path / "a.json", "a", [-1.0, -2.0, -3.0, -4.0], ["soap", "soap", "dry", "dry"])
+    _write(tmp_path / "b.json", "b", [-1.5, -2.5, -2.0, -4.0], ["soap", "soap", "dry", "dry"])
+    assert compare_stops.main([str(tmp_path / "a.json"), "a", str(tmp_path / "b.json"), "b"]) == 0
+    out = capsys.readouterr().out
+    assert "returns less on 50 %, more on 25 %" in out
+    assert "soap           n   2  median   -50.0 m  less on 100 %" in out
+    assert "dry            n   2  median   +50.0 m  less on   0 %" in out
+
+
+def test_refuses_different_stops_and_a_missing_policy(tmp_path):
+    _write(tmp_path / "a.json", "a", [-1.0, -2.0], ["soap", "dry"])
+    _write(tmp_path / "b.json", "b", [-1.0], ["soap"])
+    assert compare_stops.main([str(tmp_path / "a.json"), "a", str(tmp_path / "b.json"), "b"]) == 2
+    with pytest.raises(SystemExit, match="no runs of policy 'c'"):
+        compare_stops.main([str(tmp_path / "a.json"), "c", str(tmp_path / "b.json"), "b"])
