@@ -96,6 +96,26 @@ class SB3VecEnv(VecEnv):
         self._warmup_return[:] = self.venv.core.episode_return
         return obs
 
+    # the counters of the stops under way, beside the core's state (``BrakingCore.state_dict``):
+    # each stop's steps and control periods towards its limit, and the adapter's episode length
+    # and warm-up return (its episode statistics)
+    _COUNTERS = (("venv", "episode_steps"), ("venv", "episode_periods"), ("self", "_lengths"),
+                 ("self", "_warmup_return"))  # fmt: skip
+
+    def state_dict(self) -> dict[str, np.ndarray]:
+        """The stops' counters a resumed run needs beside the core's state (copies)."""
+        return {name: getattr(self.venv if owner == "venv" else self, name).copy()
+                for owner, name in self._COUNTERS}  # fmt: skip
+
+    def load_state_dict(self, state: dict[str, np.ndarray]) -> None:
+        """Restore ``state_dict``'s counters (same number of environments)."""
+        for owner, name in self._COUNTERS:
+            target = getattr(self.venv if owner == "venv" else self, name)
+            if np.shape(state[name]) != target.shape:
+                raise ValueError(f"state: {name} for {np.shape(state[name])} environments, this "
+                                 f"adapter has {target.shape}")  # fmt: skip
+            target[...] = state[name]
+
     def step_async(self, actions: np.ndarray) -> None:
         self._actions = actions
 

@@ -232,3 +232,23 @@ def test_dagger_teacher_is_reset_after_the_warm_up(monkeypatch):
         imitation.pretrain(None, env, env.venv.core, imitation.PretrainConfig(), gamma=0.99)
     np.testing.assert_array_equal(teacher.times, env.venv.core.sim.time_s)
     assert (teacher.times > 0.0).sum() >= 2
+
+
+def test_the_adapters_counters_round_trip_for_a_resume():
+    """``SB3VecEnv.state_dict``: each stop's steps and periods towards its limit and the
+    adapter's episode length and warm-up return come back in a new adapter (a resumed run's
+    episode statistics and time limits go on where they were); another size is refused."""
+    kwargs = {"num_envs": 3, "scenario": {"speed_kmh": [30, 40]}, "stagger_reset_steps": 20}
+    a = SB3VecEnv(**kwargs)
+    a.seed(5)
+    a.reset()
+    for _ in range(7):
+        a.step(np.zeros((3, a.action_space.shape[0]), dtype=np.float32))
+    state = a.state_dict()
+    assert (state["_lengths"] == 7).all() and (state["episode_periods"] >= 7).all()
+    b = SB3VecEnv(**kwargs)
+    b.load_state_dict(state)
+    for k, v in state.items():
+        np.testing.assert_array_equal(b.state_dict()[k], v)
+    with pytest.raises(ValueError, match="episode_steps for"):
+        SB3VecEnv(**{**kwargs, "num_envs": 2}).load_state_dict(state)

@@ -177,12 +177,14 @@ def test_normalisation_is_found_under_any_checkpoint_name(ppo_run, tmp_path):
 RECURRENT = {"algo": "recurrent_ppo", "policy_kwargs": {"net_arch": [16], "lstm_hidden_size": 8}}
 
 
-@pytest.mark.parametrize("kind", ["ppo", "sac", "frame_stack", "recurrent_ppo"])
+@pytest.mark.parametrize("kind", ["ppo", "sac", "frame_stack", "recurrent_ppo", "time_limit"])
 def test_resume_in_chunks_is_bit_for_bit(tmp_path, kind):
     """A run stopped half way (--chunk-timesteps) and resumed ends with exactly the weights
     and normalisation of the run trained in one go: the schedules follow the run's total, the
     environments' physics and random generators, torch's and numpy's random state (and SAC's
-    replay buffer, the frame stack, the LSTM state) come back from the checkpoint."""
+    replay buffer, the frame stack, the LSTM state, each stop's steps towards its time limit)
+    come back from the checkpoint. ``time_limit``: 1 s stops (50 periods) that straddle the
+    chunk's end (32 steps of each environment) truncate at the same step after the resume."""
     cfg = {  # ppo: a curve cadence (300) that is no multiple of a rollout (256)
         "ppo": lambda: train_config(
             tmp_path,
@@ -197,7 +199,9 @@ def test_resume_in_chunks_is_bit_for_bit(tmp_path, kind):
         "sac": lambda: _sac(tmp_path),
         "frame_stack": lambda: train_config(tmp_path, frame_stack=3),
         "recurrent_ppo": lambda: train_config(tmp_path, **RECURRENT),
-    }[kind]()
+        "time_limit": lambda: train_config(tmp_path, env_kwargs={
+            "vehicle": "uic_z1", "scenario": {"speed_kmh": [30, 40]}, "max_time_s": 1.0}),
+    }[kind]()  # fmt: skip
     # ppo: the chunk ends past a curve point (300) that the one-go run takes at its next
     # rollout's start, at the same step
     half = {"sac": "200", "ppo": "512"}.get(kind, "256")
@@ -229,6 +233,14 @@ def test_resume_in_chunks_is_bit_for_bit(tmp_path, kind):
     with (rest / "progress.csv").open(newline="") as fh:
         steps = [int(float(r["time/total_timesteps"])) for r in csv.DictReader(fh)]
     assert steps == sorted(set(steps)) and (kind == "sac" or steps[-1] > int(half))
+    if kind == "time_limit":  # the stops that straddle the resume count their whole length
+        with (
+            (one / "progress.csv").open(newline="") as a,
+            (rest / "progress.csv").open(newline="") as b,
+        ):
+            lengths = [[r["rollout/ep_len_mean"] for r in csv.DictReader(f)
+                        if r.get("rollout/ep_len_mean")] for f in (a, b)]  # fmt: skip
+        assert lengths[0] and lengths[0][-1] == lengths[1][-1] == "50.0"
 
 
 def test_a_run_with_action_repeat_trains_and_evaluates_with_its_repeat(tmp_path, capsys):

@@ -106,6 +106,15 @@ def _wrap_frame_stack(cfg: TrainConfig, env: Any) -> Any:
     return VecFrameStack(env, cfg.frame_stack)
 
 
+def _adapter(env: Any) -> Any:
+    """The ``SB3VecEnv`` under an SB3 env's wrappers."""
+    from wsp_env.agents.sb3_vec import SB3VecEnv
+
+    while not isinstance(env, SB3VecEnv):
+        env = env.venv
+    return env
+
+
 def _braking_core(env: Any) -> Any:
     """The ``BrakingCore`` under an SB3 env (through VecNormalize if any)."""
     while not hasattr(env, "venv") or not hasattr(env.venv, "core"):
@@ -139,6 +148,8 @@ def _save_checkpoint(model: Any, cfg: TrainConfig, folder: Path, handover: Any =
     norm = model.get_vec_normalize_env()
     state = {
         "core": _braking_core(model.get_env()).state_dict(),
+        # the stops' counters: steps towards the time limit, the episode statistics
+        "adapter": _adapter(model.get_env()).state_dict(),
         "torch_rng": torch.get_rng_state(),
         "numpy_rng": np.random.get_state(),  # noqa: NPY002 (SB3 draws from numpy's global)
         "python_rng": random.getstate(),
@@ -582,6 +593,8 @@ def _train(
         with (ckpt / "state.pkl").open("rb") as fh:
             state = pickle.load(fh)
         _braking_core(venv).load_state_dict(state["core"])
+        if state.get("adapter") is not None:  # checkpoints from 2026-11-26 on
+            venv.load_state_dict(state["adapter"])
         env: Any = venv
         if cfg.normalize is not None:
             env = VecNormalize.load(str(ckpt / "model.vecnormalize.pkl"), venv)
