@@ -41,6 +41,7 @@ import os
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
@@ -93,6 +94,15 @@ LOOP_CATEGORY = {"sensor_scale": "sensor", "sensor_lag": "sensor",
 # a lag is found in its shape: the parameter the loop's pressure lag must carry
 SHAPE_KEY = {"pressure_lag": "lag_s", "pressure_time_constant": "time_constant_s",
              "sensor_scale": "speed_scale_error", "sensor_lag": "speed_lag_s"}  # fmt: skip
+LAG_KEYS = ("lag_s", "time_constant_s")  # a pressure lag's parameters (its shape)
+
+
+def lag_keys(effects: list[Any]) -> set[str]:
+    """The pressure-lag parameters the trace's true effects give (its shape)."""
+    return {SHAPE_KEY[e.category] for e in effects
+            if LOOP_CATEGORY.get(e.category, e.category) == "pressure_lag"}  # fmt: skip
+
+
 # Adhesion effects are seen only where the wheels reach the adhesion limit: on a wet or dry rail
 # an emergency stop hardly slides, the adhesion channel has no evidence and the effect is
 # unobservable by any method. Their scenarios draw a low-adhesion contaminant (the generator's
@@ -212,6 +222,9 @@ def _run_one(job: dict[str, Any]) -> dict[str, Any]:
             other_form = any(key in a.get("parameters", {}) for s in hits
                              for a in s.get("alternative_fits", []))  # fmt: skip
             hits = [s for s in hits if key in s["parameters"]]
+            if want == "pressure_lag":  # in its shape: exactly the trace's lag parameters (a
+                truth = lag_keys(effects)  # dead time read as both shapes is no finding)
+                hits = [s for s in hits if set(s["parameters"]) & set(LAG_KEYS) == truth]
         if eff.category == "adhesion_position":  # a change found the wrong way is no finding
             up = eff.params["factor"] > 1.0
             hits = [s for s in hits
@@ -412,14 +425,23 @@ def summarise(results: list[dict[str, Any]]) -> dict[str, Any]:
     return out
 
 
-def _on_sliding_rails(rs: list[dict[str, Any]], hit: Any) -> dict[str, float]:
+def _on_sliding_rails(
+    rs: list[dict[str, Any]], hit: Callable[[dict[str, Any]], bool]
+) -> dict[str, float]:
     """The rate of ``hit`` on the traces drawn on a rail where an emergency stop slides
     (``SLIDING_RAILS``: soap, leaves, oil), where the wheels can name a pressure lag's shape; on
     wet and dry rail they hardly slide and the balance alone cannot tell the shapes apart."""
     sub = [r for r in rs if r.get("contaminant") in SLIDING_RAILS[0]]
     if not sub:
-        return {"sliding_n": 0, "sliding_rate": math.nan}
-    return {"sliding_n": len(sub), "sliding_rate": float(np.mean([bool(hit(r)) for r in sub]))}
+        return {"sliding_n": 0.0, "sliding_rate": math.nan}
+    return {"sliding_n": float(len(sub)),
+            "sliding_rate": float(np.mean([bool(hit(r)) for r in sub]))}  # fmt: skip
+
+
+def _rate(row: dict[str, Any]) -> str:
+    """A row's rate on sliding rails as text ("—" where none of its traces is on one)."""
+    rate = row.get("sliding_rate", math.nan)
+    return "—" if not math.isfinite(rate) else f"{100 * rate:.0f} %"
 
 
 def _by_geometry(rs: list[dict[str, Any]]) -> dict[str, dict[str, float]]:
@@ -526,7 +548,7 @@ def print_table(summary: dict[str, Any]) -> None:
                       f"{100 * row['category_rate']:.0f} %")  # fmt: skip
             if cat.startswith("pressure_") and row.get("sliding_n"):
                 print(f"{'':24s} {row['magnitude']:10.4g}: in its shape on sliding rails "
-                      f"{100 * row['sliding_rate']:.0f} % (n {row['sliding_n']})")  # fmt: skip
+                      f"{100 * row['sliding_rate']:.0f} % (n {row['sliding_n']:.0f})")  # fmt: skip
             geo = row.get("geometry", {})
             if cat == "load_transfer" and geo:
                 print(f"{'':24s} {row['magnitude']:10.4g}: " + "; ".join(
@@ -567,7 +589,7 @@ def print_table(summary: dict[str, Any]) -> None:
     for p in summary["pairs"]:
         print(f"pair {p['effects']}: both found {100 * p['both_found_rate']:.0f} % "
               f"(first only {100 * p['first_only_rate']:.0f} %), n {p['n']}; on sliding rails "
-              f"{100 * p['sliding_rate']:.0f} % (n {p['sliding_n']})")  # fmt: skip
+              f"{_rate(p)} (n {p['sliding_n']:.0f})")  # fmt: skip
     print(f"calibrate per trace: median {summary['calibrate_s_median']:.2f} s, "
           f"max {summary['calibrate_s_max']:.2f} s; generate median "
           f"{summary['generate_s_median']:.2f} s; errors {len(summary['errors'])}")  # fmt: skip
@@ -635,8 +657,8 @@ def markdown_table(summary: dict[str, Any]) -> str:
         lines += ["", f"Pairs, both found (target {100 * TARGETS['pairs_min']:.0f} %):", ""]
         lines += [
             f"- {' + '.join(map(str, p['effects']))}: {100 * p['both_found_rate']:.0f} % "
-            f"(n {p['n']}; on sliding rails {100 * p['sliding_rate']:.0f} % of "
-            f"{p['sliding_n']})"
+            f"(n {p['n']}; on sliding rails {_rate(p)} of "
+            f"{p['sliding_n']:.0f})"
             for p in summary["pairs"]
         ]
     lags = [(cat, r) for cat, info in summary["categories"].items() if cat.startswith("pressure_")
@@ -646,7 +668,7 @@ def markdown_table(summary: dict[str, Any]) -> str:
                   "oil; on wet and dry rail the wheels hardly slide, and the balance alone cannot "
                   "tell a dead time from a first-order lag: the other shape is then named as an "
                   "equally good alternative): " + "; ".join(
-                      f"{cat} {100 * r['sliding_rate']:.0f} % of {r['sliding_n']}"
+                      f"{cat} {_rate(r)} of {r['sliding_n']:.0f}"
                       for cat, r in lags) + "."]  # fmt: skip
     c = summary["clean"]
     lines += [

@@ -12,16 +12,21 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 
-def runs_of(path: str, policy: str) -> dict[tuple[str, int], dict]:
-    data = json.loads(open(path, encoding="utf-8").read())
+def runs_of(path: str, policy: str) -> tuple[dict[tuple[str, int], dict], tuple[Any, Any]]:
+    """``policy``'s runs in the benchmark JSON at ``path`` by (scenario, seed), and the file's
+    (vehicle, tier): the sealed stops' names and seeds are the same for every vehicle."""
+    data = json.loads(Path(path).read_text(encoding="utf-8"))
     runs = data.get("run_results", {})
-    if policy not in runs:
+    if not runs.get(policy):
         raise SystemExit(f"{path}: no runs of policy {policy!r} (has: {', '.join(runs) or 'none'})")
-    return {(r["scenario"], int(r["seed"])): r for r in runs[policy]}
+    return {(r["scenario"], int(r["seed"])): r for r in runs[policy]}, (
+        data.get("vehicle"), data.get("tier"))  # fmt: skip
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -31,8 +36,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("other_json")
     ap.add_argument("other_policy")
     args = ap.parse_args(argv)
-    base = runs_of(args.base_json, args.base_policy)
-    other = runs_of(args.other_json, args.other_policy)
+    base, where = runs_of(args.base_json, args.base_policy)
+    other, other_where = runs_of(args.other_json, args.other_policy)
+    if where != other_where:
+        print(f"the two files are of different vehicles or tiers: {where} and {other_where}",
+              file=sys.stderr)  # fmt: skip
+        return 2
     if base.keys() != other.keys():
         print("the two files hold different stops", file=sys.stderr)
         return 2

@@ -13,10 +13,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "scripts"))
 import compare_stops
 
 
-def _write(path: Path, policy: str, returns: list[float], rails: list[str]) -> None:
+def _write(path: Path, policy: str, returns: list[float], rails: list[str],
+           tier: str = "wheels+accel") -> None:  # fmt: skip
     runs = [{"scenario": f"s{i}", "seed": i, "return": r, "conditions": {"rail": rail}}
             for i, (r, rail) in enumerate(zip(returns, rails, strict=True))]  # fmt: skip
-    path.write_text(json.dumps({"run_results": {policy: runs}}))
+    path.write_text(json.dumps({"vehicle": "uic_z1", "tier": tier, "run_results": {policy: runs}}))
 
 
 def test_counts_the_stops_where_one_returns_less_and_the_median_by_rail(tmp_path, capsys):
@@ -29,8 +30,10 @@ def test_counts_the_stops_where_one_returns_less_and_the_median_by_rail(tmp_path
     assert "dry            n   2  median   +50.0 m  less on   0 %" in out
 
 
-def test_refuses_different_stops_and_a_missing_policy(tmp_path):
+def test_refuses_different_stops_tiers_and_a_missing_policy(tmp_path):
     _write(tmp_path / "a.json", "a", [-1.0, -2.0], ["soap", "dry"])
+    _write(tmp_path / "w.json", "w", [-1.0, -2.0], ["soap", "dry"], tier="wheels")
+    assert compare_stops.main([str(tmp_path / "a.json"), "a", str(tmp_path / "w.json"), "w"]) == 2
     _write(tmp_path / "b.json", "b", [-1.0], ["soap"])
     assert compare_stops.main([str(tmp_path / "a.json"), "a", str(tmp_path / "b.json"), "b"]) == 2
     with pytest.raises(SystemExit, match="no runs of policy 'c'"):

@@ -374,8 +374,7 @@ def _try_single(loop: _Loop, cand: Candidate) -> Qualified | None:
     gain = 1 - rmse1 / rmse0
     if by_wheels:
         assert loop.wheels is not None
-        row["wheel_lag_s"], row["wheel_lag_se_s"] = loop.wheels.lag_s, loop.wheels.se_s
-        row["wheel_lag_shape"] = loop.wheels.shape
+        row.update(loop.wheels.confidence())
         if rmse1 < rmse0 and dbic < -MIN_DELTA_BIC:
             return (gain, cand, params, new, rmse0, rmse1, dbic, k)
         row["rejected"] = "the wheels' lag does not improve the balance"
@@ -424,8 +423,8 @@ def _single_rejected(
     if cand.fit is fit_sensor_lag and lag_first:
         assert loop.wheels is not None
         reason = reason or (
-            f"the wheels show the brake {loop.wheels.lag_s:.2f} s late: that lag explains "
-            "the balance first"
+            f"the wheels show the brake {loop.wheels.late_text()}: that lag explains the "
+            "balance first"
         )
     return reason
 
@@ -677,8 +676,7 @@ def _add_pair(
         st = Step(PAIR_NAMES[category], category, ch, p_fit, before, after, dbic)
         if category == "pressure_lag" and loop.wheel == "late":
             assert loop.wheels is not None
-            st.confidence.update(wheel_lag_s=loop.wheels.lag_s, wheel_lag_se_s=loop.wheels.se_s,
-                                 wheel_lag_shape=loop.wheels.shape)  # fmt: skip
+            st.confidence.update(loop.wheels.confidence())
         loop.result.added.append(st)
         before = after
     loop.result.errors_after[ch] = rmse1
@@ -701,8 +699,7 @@ def _add_single(
     step = Step(cand.name, cand.category, cand.channel, params, rmse0, rmse1, dbic)
     if cand.fit in LAG_FIT_SET and loop.wheel == "late":
         assert loop.wheels is not None
-        step.confidence.update(wheel_lag_s=loop.wheels.lag_s, wheel_lag_se_s=loop.wheels.se_s,
-                               wheel_lag_shape=loop.wheels.shape)  # fmt: skip
+        step.confidence.update(loop.wheels.confidence())
     result.errors_after[cand.channel] = rmse1
     if cand.category == "sensor" and cand.channel == COASTING:
         # the same scale error acts on the balance channel: correct it there too

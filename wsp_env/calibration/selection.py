@@ -182,5 +182,6 @@ class Result:
     dropped: list[dict[str, Any]] = field(default_factory=list)
     n_axles: int = 0
     # the brake's lag behind the logged pressure as the sliding wheels show it (``wheel_lag``):
-    # lag_s, se_s, episodes, verdict (late / on_time / unknown); empty where no wheel slid
+    # lag_s, se_s, episodes, shape (dead_time / first_order / both; for both, time_constant_s
+    # beside the dead time lag_s), verdict (late / on_time / unknown); empty where no wheel slid
     wheel_lag: dict[str, Any] = field(default_factory=dict)

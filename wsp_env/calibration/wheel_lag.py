@@ -28,13 +28,29 @@ shape is the one whose best score is lower (on independent traces the dead time'
 6 of 6 traces with a 0.2 s dead time, the first order's on 6 of 6 with a 0.3 s constant), and the
 lag is that shape's parameter.
 
+Both at once (a dead time, then a first-order lag: a sensor upstream of a cylinder that fills
+through a restriction) is a third shape with two parameters, scored on the grid
+``BOTH_DEAD_GRID_S`` x ``TC_GRID_S`` (``_both``). It must earn each parameter:
+
+* its smoothest point has a dead time and a constant of at least ``RESOLUTION_S`` each (the
+  wheels' resolution: on clean traces they read -0.04 to +0.04 s) and lies inside the grid;
+* its score beats the best of each single shape by ``BOTH_Z`` standard errors of the paired
+  per-episode difference (the episodes are the independent pieces of evidence).
+
+The second test is optimistic (its point is the best of some 1,000 on the same episodes: on a
+pure 0.3 s first-order trace the best two-parameter point beat both single shapes by 7 and 3
+standard errors, with a dead time of 0.06 s); the resolution is what keeps a single shape
+single. Counts on independent traces: ``scripts/lag_shapes.py``.
+
 Uncertainty: the slides fall into separate episodes (a contiguous run of sliding samples of
 one axle, with a few samples either side); the lag's standard error is the jackknife over
-episodes (each left out in turn, the lag re-found from the other episodes' sums).
+episodes (each left out in turn, the lag re-found from the other episodes' sums). For both
+shapes it is the dead time's, on its 0.02 s grid without refinement: a rough figure.
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -66,9 +82,10 @@ class WheelLag:
     """The lag (s) at which the wheels' adhesion force is smoothest — a dead time, or a
     first-order time constant where ``shape`` is ``"first_order"``, or the dead time where it
     is ``"both"`` (then the constant is ``time_constant_s``) —, its jackknife standard error
-    (s), the number of slide episodes it rests on, and the shape's score curve over its grid
-    (``TAU_GRID_S`` or ``TC_GRID_S``: mean squared change of the force, N^2, per sample pair;
-    for both, over ``TC_GRID_S`` at the dead time found)."""
+    (s; for both, the dead time's, rough: module docstring), the number of slide episodes it
+    rests on, and the shape's score curve over its grid (``TAU_GRID_S`` or ``TC_GRID_S``: mean
+    squared change of the force, N^2, per sample pair; for both, over ``TC_GRID_S`` at the dead
+    time found)."""
 
     lag_s: float
     se_s: float
@@ -84,6 +101,23 @@ class WheelLag:
             return {"lag_s": self.lag_s, "time_constant_s": self.time_constant_s}
         key = "time_constant_s" if self.shape == "first_order" else "lag_s"
         return {key: self.lag_s}
+
+    def late_text(self) -> str:
+        """How late the brake is, in words (a first-order lag's mean delay is its constant)."""
+        if self.shape == "both":
+            return (f"{self.lag_s:.2f} s late, then through a {self.time_constant_s:.2f} s "
+                    "first-order lag")  # fmt: skip
+        if self.shape == "first_order":
+            return f"late through a {self.lag_s:.2f} s first-order lag"
+        return f"{self.lag_s:.2f} s late"
+
+    def confidence(self) -> dict[str, float | str]:
+        """What a pressure-lag step records of the wheels' reading (``Step.confidence``)."""
+        out: dict[str, float | str] = {"wheel_lag_s": self.lag_s, "wheel_lag_se_s": self.se_s,
+                                       "wheel_lag_shape": self.shape}  # fmt: skip
+        if self.shape == "both":
+            out["wheel_time_constant_s"] = self.time_constant_s
+        return out
 
     def as_dict(self) -> dict[str, float | str]:
         out: dict[str, float | str] = {
@@ -134,29 +168,22 @@ def wheel_lag(trace: Trace) -> WheelLag | None:
         pair = active[1:] & active[:-1]
         if not pair.any():
             continue
-        accel = np.gradient(v_kmh / 3.6, t)  # m/s^2 at the rim
-        inertial = inertia * accel / (r * r)  # N
-        # episodes: contiguous runs of active sample pairs
+        # episodes: contiguous runs of active sample pairs; one carries timing only where
+        # the valve acted in it
         edges = np.diff(np.concatenate([[0], pair.astype(int), [0]]))
         starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
-        lagged = np.stack(
-            [np.interp(t - tau, t, torque[:, i], left=0.0) for tau in TAU_GRID_S], axis=0
-        )  # (n_tau, T)
-        filtered = first_order(t, np.repeat(torque[:, i : i + 1], len(TC_GRID_S), axis=1),
-                               TC_GRID_S).T  # (n_tc, T)  # fmt: skip
-        dead = np.stack([np.interp(t - d, t, torque[:, i], left=0.0) for d in BOTH_DEAD_GRID_S],
-                        axis=1)  # (T, n_dead)  # fmt: skip
-        both = first_order(
-            t, np.repeat(dead, len(TC_GRID_S), axis=1), np.tile(TC_GRID_S, len(BOTH_DEAD_GRID_S))
-        ).T  # (n_dead x n_tc, T)
-        lagged = np.concatenate([lagged, filtered, both], axis=0)
-        force = inertial[None, :] + lagged / r  # the adhesion force at each lag
-        change2 = np.diff(force, axis=1) ** 2  # (n_tau, T-1)
         big = float(torque[:, i].max())
-        for a, b in zip(starts, ends, strict=True):
-            seg = torque[a : b + 1, i]
-            if b - a >= 2 and big > 0.0 and np.ptp(seg) >= VALVE_ACTION * big:
-                per_episode.append(np.concatenate([change2[:, a:b].sum(axis=1), [b - a]]))
+        episodes = [(a, b) for a, b in zip(starts, ends, strict=True)
+                    if b - a >= 2 and big > 0.0
+                    and np.ptp(torque[a : b + 1, i]) >= VALVE_ACTION * big]  # fmt: skip
+        if not episodes:
+            continue
+        accel = np.gradient(v_kmh / 3.6, t)  # m/s^2 at the rim
+        inertial = inertia * accel / (r * r)  # N
+        sums = np.concatenate([_episode_sums(block, inertial, r, episodes)
+                               for block in _lagged_torques(t, torque[:, i])], axis=1)  # fmt: skip
+        counts = np.array([[b - a] for a, b in episodes], dtype=float)
+        per_episode.extend(np.concatenate([sums, counts], axis=1))
     if len(per_episode) < MIN_EPISODES:
         return None
     table = np.stack(per_episode, axis=0)  # (episodes, columns + 1): sums, pair counts
@@ -180,6 +207,35 @@ def wheel_lag(trace: Trace) -> WheelLag | None:
     return WheelLag(lag, se, m, total[cols], "first_order" if first else "dead_time")
 
 
+BLOCK_ELEMENTS = 2_000_000  # lagged-torque samples held at once (memory on long logs)
+
+
+def _lagged_torques(t: np.ndarray, torque: np.ndarray) -> Iterator[np.ndarray]:
+    """One axle's torque through every lag the wheels score, in blocks of columns (each
+    ``(columns, T)``), in the order of the table: the dead times of ``TAU_GRID_S``, the time
+    constants of ``TC_GRID_S``, then both shapes dead-time-major (``BOTH_DEAD_GRID_S`` x
+    ``TC_GRID_S``), a few dead times per block so that a long log's block stays near
+    ``BLOCK_ELEMENTS`` samples."""
+    yield np.stack([np.interp(t - tau, t, torque, left=0.0) for tau in TAU_GRID_S], axis=0)
+    n_tc = len(TC_GRID_S)
+    yield first_order(t, np.repeat(torque[:, None], n_tc, axis=1), TC_GRID_S).T
+    per_block = max(1, BLOCK_ELEMENTS // (n_tc * len(t)))
+    for k in range(0, len(BOTH_DEAD_GRID_S), per_block):
+        dead = np.stack([np.interp(t - d, t, torque, left=0.0)
+                         for d in BOTH_DEAD_GRID_S[k : k + per_block]], axis=1)  # fmt: skip
+        yield first_order(t, np.repeat(dead, n_tc, axis=1),
+                          np.tile(TC_GRID_S, dead.shape[1])).T  # fmt: skip
+
+
+def _episode_sums(
+    lagged: np.ndarray, inertial: np.ndarray, r: float, episodes: list[tuple[int, int]]
+) -> np.ndarray:
+    """``(episodes, columns)``: each episode's sum of squared sample-to-sample changes of the
+    adhesion force ``inertial + lagged / r`` (N), one column per lag of ``lagged``."""
+    change2 = np.diff(inertial[None, :] + lagged / r, axis=1) ** 2
+    return np.stack([change2[:, a:b].sum(axis=1) for a, b in episodes], axis=0)
+
+
 def _both(sums: np.ndarray, total: np.ndarray, n_tau: int, n_tc: int) -> WheelLag | None:
     """Both shapes at once where they earn both parameters (module docstring), else ``None``.
     ``sums``: per-episode sums of squared force changes over the columns dead time, first
@@ -188,6 +244,8 @@ def _both(sums: np.ndarray, total: np.ndarray, n_tau: int, n_tc: int) -> WheelLa
     k, j = np.unravel_index(int(np.argmin(two)), two.shape)
     dead_s, tc_s = float(BOTH_DEAD_GRID_S[k]), float(TC_GRID_S[j])
     if dead_s < RESOLUTION_S or tc_s < RESOLUTION_S:
+        return None
+    if k == two.shape[0] - 1 or j == two.shape[1] - 1:  # at the grid's end: not identified
         return None
     col = n_tau + n_tc + k * n_tc + j
     m = len(sums)

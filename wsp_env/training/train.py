@@ -111,6 +111,8 @@ def _adapter(env: Any) -> Any:
     from wsp_env.agents.sb3_vec import SB3VecEnv
 
     while not isinstance(env, SB3VecEnv):
+        if not hasattr(env, "venv"):
+            raise TypeError(f"{type(env).__name__}: no SB3VecEnv under this training env")
         env = env.venv
     return env
 
