@@ -631,7 +631,8 @@ def markdown_table(summary: dict[str, Any]) -> str:
         "chosen, or named among the chosen effect's equally good `alternatives` (never counted "
         "as detected); *alone*: detected and not declared ambiguous (no alternative inside the "
         "tie margin); *extra*: traces where another effect was added as well. A pressure lag is "
-        "detected in its shape (a dead time's `lag_s`, a first-order lag's `time_constant_s`).",
+        "detected in its shape: with exactly its parameters (a dead time's `lag_s`, a first-order "
+        "lag's `time_constant_s`, both for both).",
         "",
         "| category | target (unit) | n | detected | or alt | alone | smallest at >= 90 % "
         "| parameter error | extra | met |",
