@@ -67,7 +67,7 @@ def test_a_dead_time_and_a_first_order_lag_together_are_read_as_both(tmp_path, s
     """A 0.15 s dead time then a 0.3 s time constant on soap: the wheels read both shapes at
     once (each part at least their resolution, smoother than either shape alone by the
     paired per-episode test) and the loop adds one pressure lag with both parameters; the same
-    scenario with one shape is not read as both (``wheel_lag``'s ``_both``). The dead time
+    scenario with one shape is not read as both (``wheel_lag``'s ``both_shapes``). The dead time
     reads 0.10-0.24 s on independent traces, the constant short (as a first order alone)."""
     both = [("pressure_lag", 0.15), ("pressure_time_constant", 0.3)]
     trace, _, _ = independent_trace(tmp_path, seed, both, contaminant="soap")
@@ -253,19 +253,19 @@ def _both_table(m, best, gain, noise=0.0, seed=0):
 
 
 def test_both_shapes_earn_their_place_only_inside_the_grid_above_the_resolution():
-    """``wheel_lag._both`` on synthetic per-episode sums: the column's place in the table
+    """``wheel_lag.both_shapes`` on synthetic per-episode sums: the column's place in the table
     (dead-time-major) gives its dead time and constant; a dead time or constant under the
     wheels' resolution, a point on the grid's end, or a gain that a few episodes carry while
     the others lose, is no reading of both."""
-    from wsp_env.calibration.wheel_lag import BOTH_DEAD_GRID_S, TC_GRID_S, _both
+    from wsp_env.calibration.wheel_lag import BOTH_DEAD_GRID_S, TC_GRID_S, both_shapes
 
-    found = _both(*_both_table(12, (8, 10), 2.0, noise=0.1))
+    found = both_shapes(*_both_table(12, (8, 10), 2.0, noise=0.1))
     assert found is not None and found.shape == "both"
     assert found.lag_s == pytest.approx(BOTH_DEAD_GRID_S[8]) == pytest.approx(0.16)
     assert found.time_constant_s == pytest.approx(TC_GRID_S[10]) == pytest.approx(0.2)
     assert found.params == {"lag_s": found.lag_s, "time_constant_s": found.time_constant_s}
-    assert _both(*_both_table(12, (3, 10), 2.0, noise=0.1)) is None  # 0.06 s dead time
-    assert _both(*_both_table(12, (8, 4), 2.0, noise=0.1)) is None  # 0.08 s constant
-    assert _both(*_both_table(12, (len(BOTH_DEAD_GRID_S) - 1, 10), 2.0, noise=0.1)) is None
+    assert both_shapes(*_both_table(12, (3, 10), 2.0, noise=0.1)) is None  # 0.06 s dead time
+    assert both_shapes(*_both_table(12, (8, 4), 2.0, noise=0.1)) is None  # 0.08 s constant
+    assert both_shapes(*_both_table(12, (len(BOTH_DEAD_GRID_S) - 1, 10), 2.0, noise=0.1)) is None
     uneven = np.where(np.arange(12) < 2, 14.0, -0.5)  # two episodes carry it, ten lose a little
-    assert _both(*_both_table(12, (8, 10), uneven, noise=0.1)) is None
+    assert both_shapes(*_both_table(12, (8, 10), uneven, noise=0.1)) is None

@@ -30,7 +30,7 @@ lag is that shape's parameter.
 
 Both at once (a dead time, then a first-order lag: a sensor upstream of a cylinder that fills
 through a restriction) is a third shape with two parameters, scored on the grid
-``BOTH_DEAD_GRID_S`` x ``TC_GRID_S`` (``_both``). It must earn each parameter:
+``BOTH_DEAD_GRID_S`` x ``TC_GRID_S`` (``both_shapes``). It must earn each parameter:
 
 * its smoothest point has a dead time and a constant of at least ``RESOLUTION_S`` each (the
   wheels' resolution: on clean traces they read -0.04 to +0.04 s) and lies inside the grid;
@@ -190,7 +190,7 @@ def wheel_lag(trace: Trace) -> WheelLag | None:
     sums, counts = table[:, :-1], table[:, -1]
     total = sums.sum(axis=0) / counts.sum()
     n_tau, n_tc = len(TAU_GRID_S), len(TC_GRID_S)
-    both = _both(sums, total, n_tau, n_tc)
+    both = both_shapes(sums, total, n_tau, n_tc)
     if both is not None:
         return both
     first = bool(total[n_tau : n_tau + n_tc].min() < total[:n_tau].min())
@@ -236,7 +236,7 @@ def _episode_sums(
     return np.stack([change2[:, a:b].sum(axis=1) for a, b in episodes], axis=0)
 
 
-def _both(sums: np.ndarray, total: np.ndarray, n_tau: int, n_tc: int) -> WheelLag | None:
+def both_shapes(sums: np.ndarray, total: np.ndarray, n_tau: int, n_tc: int) -> WheelLag | None:
     """Both shapes at once where they earn both parameters (module docstring), else ``None``.
     ``sums``: per-episode sums of squared force changes over the columns dead time, first
     order, both (dead-time-major); ``total`` their means per sample pair."""
@@ -275,5 +275,6 @@ __all__ = [
     "TAU_GRID_S",
     "TC_GRID_S",
     "WheelLag",
+    "both_shapes",
     "wheel_lag",
 ]
