@@ -315,6 +315,7 @@ def test_discrete_models_are_evaluated_in_discrete_mode(tmp_path):
             {"env_kwargs": {"reward": {"shaping_decel_mps2": 1.0, "shaping_gamma": 0.99}}},
             "env_kwargs.reward.shaping_gamma",
         ),
+        ({"algo": "sac", "frame_stack": 3}, "frame_stack: 3 with normalize is not supported"),
     ],
 )
 def test_bad_config_is_one_line_naming_file_and_field(tmp_path, capsys, changes, field):

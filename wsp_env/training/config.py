@@ -208,6 +208,14 @@ def parse_train_config(data: Any, source: str = "") -> TrainConfig:
                 raise ConfigError(f"normalize.{k}: unknown (allowed: {', '.join(sorted(allowed))})")
     else:
         raise ConfigError(f"normalize: expected true, false or a mapping, got {normalize!r}")
+    if algo in OFF_POLICY and frame_stack > 1 and normalize is not None:
+        # SB3's off-policy learners store VecNormalize's original observation, which under the
+        # frame stack is one frame where the replay buffer holds the stack
+        raise ConfigError(
+            f"frame_stack: {frame_stack} with normalize is not supported for {algo} (its replay "
+            "buffer stores the un-normalised observation, one frame under the stack); use "
+            "frame_stack 1 (memory_features give the WSP's history) or normalize: false"
+        )
     policy_kwargs = data.pop("policy_kwargs", {}) or {}
     if not isinstance(policy_kwargs, dict):
         raise ConfigError(f"policy_kwargs: expected a mapping, got {policy_kwargs!r}")
