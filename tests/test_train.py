@@ -243,11 +243,27 @@ def test_resume_in_chunks_is_bit_for_bit(tmp_path, kind):
         assert lengths[0] and lengths[0][-1] == lengths[1][-1] == "50.0"
 
 
+def _first_returns(env, act, n_envs):
+    """Each environment's first episode return, acting with ``act(obs, ended)``."""
+    obs, _ = env.reset(seed=123)
+    ret, acc, done = np.full(n_envs, np.nan), np.zeros(n_envs), np.zeros(n_envs, dtype=bool)
+    ended = np.zeros(n_envs, dtype=bool)
+    while not done.all():
+        obs, r, term, trunc, _ = env.step(act(obs, ended))
+        acc += np.where(done, 0.0, r)
+        ended = term | trunc
+        ret[ended & ~done] = acc[ended & ~done]
+        done |= ended
+    return ret
+
+
 def test_a_run_with_action_repeat_trains_and_evaluates_with_its_repeat(tmp_path, capsys):
     """The environment holds each action 3 periods in training; the model file remembers it
-    and its evaluation on the 20 ms core holds its actions as long."""
+    and its evaluation on the 20 ms core holds its actions as long: on the same seeded stops
+    the model returns exactly what it returns in its training environment (the repeat inside
+    the environment, the model on normalised, stacked observations)."""
     cfg = train_config(
-        tmp_path, n_timesteps=256, gamma=0.997,
+        tmp_path, n_timesteps=256, gamma=0.997, frame_stack=2,
         env_kwargs={"vehicle": "uic_z1", "scenario": {"speed_kmh": [30, 40]}, "action_repeat": 3},
     )  # fmt: skip
     out = tmp_path / "run"
@@ -257,6 +273,20 @@ def test_a_run_with_action_repeat_trains_and_evaluates_with_its_repeat(tmp_path,
     assert policy.action_repeat == 3
     res = json.loads((out / "curve.json").read_text())["history"]
     assert res and res[-1]["timesteps"] == 256
+    n, kwargs = 2, {"scenario": {"speed_kmh": [30, 40]}}
+    evaluated = WSPBrakingVectorEnv(num_envs=n, **kwargs)
+    policy.bind(evaluated.core)
+    by_adapter = _first_returns(evaluated, lambda obs, ended: policy.act(obs), n)
+    stack = np.zeros((n, 2 * evaluated.core.obs_dim), dtype=np.float32)
+
+    def in_training(obs, ended):
+        stack[ended] = 0.0  # a new stop: its stack empty, as the adapter's
+        w = obs.shape[1]
+        stack[:, :-w], stack[:, -w:] = stack[:, w:], policy.normalise(obs)
+        return policy.model.predict(stack, deterministic=True)[0]
+
+    trained = WSPBrakingVectorEnv(num_envs=n, action_repeat=3, **kwargs)
+    np.testing.assert_allclose(_first_returns(trained, in_training, n), by_adapter, atol=1e-9)
 
 
 def test_another_seed_is_another_run(ppo_run, tmp_path):
