@@ -119,9 +119,7 @@ def _adapter(env: Any) -> Any:
 
 def _braking_core(env: Any) -> Any:
     """The ``BrakingCore`` under an SB3 env (through VecNormalize if any)."""
-    while not hasattr(env, "venv") or not hasattr(env.venv, "core"):
-        env = env.venv
-    return env.venv.core
+    return _adapter(env).venv.core
 
 
 def save_policy_files(model: Any, stem: Path, cfg: TrainConfig) -> None:
