@@ -38,9 +38,9 @@ through a restriction) is a third shape with two parameters, scored on the grid
   per-episode difference (the episodes are the independent pieces of evidence).
 
 The second test is optimistic (its point is the best of some 1,000 on the same episodes: on a
-pure 0.3 s first-order trace the best two-parameter point beat both single shapes by 7 and 3
-standard errors, with a dead time of 0.06 s); the resolution is what keeps a single shape
-single. Counts on independent traces: ``scripts/lag_shapes.py``.
+pure first-order trace the best two-parameter point can pass it with a dead time under the
+resolution); the resolution is what keeps a single shape single. Counts on independent traces:
+``scripts/lag_shapes.py``.
 
 Uncertainty: the slides fall into separate episodes (a contiguous run of sliding samples of
 one axle, with a few samples either side); the lag's standard error is the jackknife over
