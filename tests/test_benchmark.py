@@ -24,14 +24,20 @@ def _suites():
     return [load_suite(p.stem) for p in sorted((configs_root() / "scenarios").glob("*.yaml"))]
 
 
-def test_the_sealed_set_shares_no_seed_case_or_level_with_any_suite():
+@pytest.mark.parametrize("stop_set", ["sealed", "development"])
+def test_the_sealed_set_shares_no_seed_case_or_level_with_any_suite(stop_set):
     """300 stops per vehicle; no seed, case name or adhesion level of tuning, validation,
-    en15595, heldout (or any other suite) among them; its levels are drawn, every one distinct."""
+    en15595, heldout (or any other suite) among them; its levels are drawn, every one distinct.
+    The development set likewise, and it shares no seed, name or level with the sealed set."""
     from wsp_env.core.braking import BrakingCore
 
     veh = load_vehicle("uic_z1")
-    sealed = sealed_runs(veh)
+    sealed = sealed_runs(veh, stop_set=stop_set)
     assert len(sealed) == SEALED_RUNS == 300
+    if stop_set != "sealed":
+        test_set = sealed_runs(veh)
+        assert not {r.seed for r in test_set} & {r.seed for r in sealed}
+        assert not {r.scenario for r in test_set} & {r.scenario for r in sealed}
     suite_seeds, suite_cases, suite_levels = set(), set(), set()
     for suite in _suites():
         suite_seeds |= set(suite.seeds)
@@ -52,6 +58,13 @@ def test_the_sealed_set_shares_no_seed_case_or_level_with_any_suite():
         levels.append(round(core.describe(e)["mu_contaminated"], 6))
     contaminated = [x for x, s in zip(levels, core.sim.setups, strict=True) if s.rail_name != "dry"]
     assert not suite_levels & set(contaminated)
+    if stop_set != "sealed":  # the sealed set's levels are not the development set's
+        test_levels = set()
+        for e, run in enumerate(test_set):
+            core.reset_env(e, run.options, seed=run.seed)
+            if core.sim.setups[e].rail_name != "dry":
+                test_levels.add(round(core.describe(e)["mu_contaminated"], 6))
+        assert not test_levels & set(contaminated)
     drawn = [core.describe(e) for e in range(len(sealed))]
     rails = {d["rail"] for d in drawn}
     assert rails == {"dry", "wet", "soap", "soap_etr1000", "oil", "leaves"}
@@ -167,6 +180,18 @@ def test_benchmark_runs_policies_through_one_path_and_refuses_a_foreign_tier(
     with pytest.raises(ValueError, match="belongs to tier wheels\\+accel"):
         run_benchmark([accel], "uic_z1", "wheels", runs=2)
 
+    # the development set: other stops, said so in the JSON, the printout and the report
+    out = tmp_path / "d.json"
+    capsys.readouterr()
+    rc = main(["benchmark", "--policy", "classical", "--runs", "3", "--stops", "development",
+               "--json", str(out), "--report", str(tmp_path / "dev"), "--no-progress"])  # fmt: skip
+    assert rc == 0
+    dev = json.loads(out.read_text())
+    assert dev["stops"] == "development" and not dev["sealed"] and payload["stops"] == "sealed"
+    assert "development stops: not the sealed set" in capsys.readouterr().out
+    assert "(development stops" in (tmp_path / "dev" / "report.md").read_text()
+    assert dev["policies"]["none"]["mean_return"] != payload["policies"]["none"]["mean_return"]
+
 
 @pytest.mark.parametrize(
     "argv,needle",
@@ -175,6 +200,7 @@ def test_benchmark_runs_policies_through_one_path_and_refuses_a_foreign_tier(
         (["benchmark", "--policy", "classical", "--runs", "0"], "--runs"),
         (["benchmark", "--policy", "classical", "--runs", "301"], "--runs"),
         (["benchmark", "--policy", "classical", "--tier", "eyes"], "--tier"),
+        (["benchmark", "--policy", "classical", "--stops", "test"], "--stops"),
         (["benchmark", "--policy", "no.such:thing"], "cannot import"),
         (["simulate", "--gradient-permille", "200"], "--gradient-permille"),
         (["simulate", "--accelerometer-bias-mps2", "0.1"], "no accelerometer"),

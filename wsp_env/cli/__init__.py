@@ -446,6 +446,11 @@ def _add_benchmark(sub: argparse._SubParsersAction) -> None:
         "--runs", type=int, default=None,
         help="only the sealed set's first N stops (a quick look; the score of record uses all 300)",
     )  # fmt: skip
+    p.add_argument(
+        "--stops", choices=("sealed", "development"), default="sealed",
+        help="sealed: the test set (the result of record); development: 300 other stops of the "
+        "same distribution, to diagnose and select on (sealed)",
+    )  # fmt: skip
     p.add_argument("--json", dest="json_path", default=None, help="write the result here")
     p.add_argument("--report", default=None, help="write report.md into this folder")
     p.add_argument("--no-progress", action="store_true", help="no progress lines")
@@ -474,8 +479,9 @@ def cmd_benchmark(args: argparse.Namespace) -> dict[str, Any]:
 
     with _executor(args) as executor:
         payload = run_benchmark(
-            policies, args.vehicle, args.tier, runs, progress, executor=executor
-        )
+            policies, args.vehicle, args.tier, runs, progress, executor=executor,
+            stop_set=args.stops,
+        )  # fmt: skip
     if report_tmp is not None:
         from wsp_env.evaluation.report import write_benchmark_report
 

@@ -10,6 +10,11 @@ suite's (``tests/test_benchmark.py`` checks that no seed, case name or adhesion 
 with ``tuning``, ``validation``, ``en15595``, ``heldout`` or any other suite). Nothing was tuned or
 selected on it; keep it that way (tune on ``tuning``, select on ``validation``).
 
+**The development set** (``STOP_SETS["development"]``, ``wsp-env benchmark --stops
+development``): another 300 seeds of the same distribution, shared with neither the sealed set
+nor any suite (the same test). Score, diagnose and select on it as often as needed; the sealed
+set is for the result of record.
+
 **The score** (``score``): every policy runs the same stops through one code path
 (``runner.run_runs``) with the same sensors and the same safety watchdog. Per stop, the default
 reward's undiscounted return ``R`` (minus the stop's cost in metres / 100: distance, wheel
@@ -46,6 +51,8 @@ from wsp_env.evaluation.suites import Run
 
 SEALED_RUNS = 300
 SEALED_SEED_BASE = 7_340_000  # sealed seeds: SEALED_SEED_BASE + i (no suite comes near)
+# the stop sets of the benchmark's distribution: name -> (first seed, scenario-name prefix)
+STOP_SETS = {"sealed": (SEALED_SEED_BASE, "sealed"), "development": (8_260_000, "dev")}
 DAMAGE_CRITERIA = {"max_lock_s": 1.0, "max_axle_sliding_energy_pct": 25.0, "max_slide_s": 5.0}
 MIN_GAIN = 0.05  # return units (x 100 m): the classical WSP's least gain for a scored stop
 BOOTSTRAP = 2000
@@ -60,18 +67,24 @@ POLICY_KEYS = (
 RESERVED = ("none", "classical", "oracle")  # the score's ends and the upper reference
 
 
-def sealed_seeds(n: int = SEALED_RUNS) -> list[int]:
-    """The seeds of the sealed set's first ``n`` stops."""
+def sealed_seeds(n: int = SEALED_RUNS, stop_set: str = "sealed") -> list[int]:
+    """The seeds of the first ``n`` stops of ``stop_set`` (``STOP_SETS``: the sealed set by
+    default)."""
+    if stop_set not in STOP_SETS:
+        raise ValueError(f"stops: {stop_set!r} is not one of {', '.join(STOP_SETS)}")
     if not 1 <= n <= SEALED_RUNS:
         raise ValueError(f"runs: must be 1-{SEALED_RUNS}, got {n}")
-    return [SEALED_SEED_BASE + i for i in range(n)]
+    return [STOP_SETS[stop_set][0] + i for i in range(n)]
 
 
-def sealed_runs(vehicle: VehicleConfig, n: int = SEALED_RUNS) -> list[Run]:
-    """The sealed set's first ``n`` stops on ``vehicle``: seeds only (module docstring)."""
+def sealed_runs(
+    vehicle: VehicleConfig, n: int = SEALED_RUNS, stop_set: str = "sealed"
+) -> list[Run]:
+    """The first ``n`` stops of ``stop_set`` on ``vehicle``: seeds only (module docstring)."""
+    prefix = STOP_SETS[stop_set][1] if stop_set in STOP_SETS else ""
     return [
-        Run(f"sealed_{i:03d}", seed, {}, dict(DAMAGE_CRITERIA), vehicle)
-        for i, seed in enumerate(sealed_seeds(n))
+        Run(f"{prefix}_{i:03d}", seed, {}, dict(DAMAGE_CRITERIA), vehicle)
+        for i, seed in enumerate(sealed_seeds(n, stop_set))
     ]
 
 
@@ -194,9 +207,11 @@ def run_benchmark(
     progress: Callable[[str], None] | None = None,
     keep_runs: bool = True,
     executor: Any = None,
+    stop_set: str = "sealed",
 ) -> dict[str, Any]:
     """Score ``policies`` (``policy.make_policy`` objects) on the sealed set of ``vehicle`` in
-    sensor ``tier``: ``none`` and the tier's classical WSP run too (the score's ends).
+    sensor ``tier`` (or another of ``STOP_SETS``: ``development``): ``none`` and the tier's
+    classical WSP run too (the score's ends).
     ``executor``: as ``runner.run_suite``'s (``distributed.RayExecutor``: the stops split
     across workers, the same payload).
 
@@ -207,6 +222,8 @@ def run_benchmark(
     from wsp_env.policy import NoWSP, check_sensor_tier, make_policy
 
     check_tier(tier)
+    if stop_set not in STOP_SETS:
+        raise ValueError(f"stops: {stop_set!r} is not one of {', '.join(STOP_SETS)}")
     kwargs = benchmark_env_kwargs(vehicle, tier)
     veh = load_vehicle(kwargs.pop("vehicle"))
     max_time_s = kwargs.pop("max_time_s")
@@ -230,7 +247,7 @@ def run_benchmark(
     names = [p.name for p in policies]
     ends = {"none": make_policy("none"), "classical": make_policy("classical", tier=tier)}
     todo = [ends[n] for n in ("none", "classical") if n not in names] + list(policies)
-    stops = sealed_runs(veh, runs)
+    stops = sealed_runs(veh, runs, stop_set)
     results: dict[str, list[dict[str, Any]]] = {}
     for p in todo:
         if progress is not None:
@@ -274,7 +291,8 @@ def run_benchmark(
         "vehicle": vehicle,
         "tier": tier,
         "runs": len(stops),
-        "sealed": len(stops) == SEALED_RUNS,
+        "stops": stop_set,
+        "sealed": stop_set == "sealed" and len(stops) == SEALED_RUNS,
         "policies": out_policies,
         "score_definition": "IQM over stops of (R - R_none) / (R_classical - R_none), stops "
         f"where the classical WSP gains >= {MIN_GAIN} (x 100 m); 95 % percentile bootstrap",

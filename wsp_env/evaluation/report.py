@@ -156,7 +156,11 @@ def benchmark_markdown(payload: dict[str, Any]) -> str:
     then per scenario family the score and the worst stop ratio."""
     lines = [
         f"# {payload['benchmark']}: {payload['runs']} stops"
-        + ("" if payload["sealed"] else " (not the whole sealed set)"),
+        + (
+            ""
+            if payload["sealed"]
+            else f" ({payload.get('stops', 'sealed')} stops, not the whole sealed set)"
+        ),
         "",
         f"Score: {payload['score_definition']}.",
         "",
