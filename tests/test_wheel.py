@@ -4,9 +4,10 @@ shipped policies and the trace format, and every `wsp-env` command runs from it,
 source tree.
 
 Two levels: the wheel unpacked onto ``PYTHONPATH`` of this interpreter (seconds), and the wheel
-installed by pip into fresh virtual environments, one without extras and one with
-``[rl,export]``, each running every subcommand once (marked ``wheel``: minutes; ``make test``
-runs it, ``pytest -m "not wheel"`` leaves it out).
+installed by pip into a fresh virtual environment without extras, every subcommand run once,
+then ``[rl,export]`` added to that environment as a user adds them later, and the learning
+commands run (marked ``wheel``: minutes; ``make test`` runs it, ``pytest -m "not wheel"`` leaves
+it out). One environment, not two: the second install's kernels would only compile again.
 """
 
 from __future__ import annotations
@@ -112,19 +113,27 @@ def _sh(cmd: list[str], cwd: Path, what: str) -> subprocess.CompletedProcess:
     return done
 
 
-def _fresh_venv(tmp: Path, wheel: Path, name: str, extras: str = "") -> Path:
-    """A new virtual environment with the wheel installed by pip (dependencies resolved as a
-    user's install resolves them); the `rl` extra gets the CPU build of torch first, as the
-    Makefile installs it (a plain `torch` requirement would fetch a CUDA build)."""
+def _fresh_venv(tmp: Path, wheel: Path, name: str) -> Path:
+    """A new virtual environment with the wheel installed by pip, no extras (dependencies
+    resolved as a user's install resolves them)."""
     venv = tmp / name
     done = _sh([sys.executable, "-m", "venv", str(venv)], tmp, f"{name}: venv")
     assert done.returncode == 0, done.stderr[-2000:]
-    pip = [str(venv / "bin" / "python"), "-m", "pip", "install", "--quiet"]
-    steps = (["torch==2.13.0"], [f"{wheel}{extras}"]) if extras else ([str(wheel)],)
-    for args in steps:
-        done = _sh(pip + args, tmp, f"{name}: pip install {Path(args[0]).name}")
-        assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
+    _pip(venv, tmp, str(wheel))
     return venv
+
+
+def _pip(venv: Path, tmp: Path, *args: str) -> None:
+    done = _sh([str(venv / "bin" / "python"), "-m", "pip", "install", "--quiet", *args], tmp,
+               f"{venv.name}: pip install {Path(args[0]).name}")  # fmt: skip
+    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
+
+
+def _add_extras(venv: Path, tmp: Path, wheel: Path, extras: str) -> None:
+    """The extras added to an install, as a user adds them later: the CPU build of torch first,
+    as the Makefile installs it (a plain `torch` requirement would fetch a CUDA build)."""
+    _pip(venv, tmp, "torch==2.13.0")
+    _pip(venv, tmp, f"{wheel}{extras}")
 
 
 class Installed:
@@ -155,7 +164,7 @@ class Installed:
 
 @pytest.fixture(scope="module")
 def venvs(installed, tmp_path_factory):
-    """The two fresh installs (removed afterwards: together they take about 2 GB)."""
+    """Where the fresh install goes (removed afterwards: with the extras about 1.5 GB)."""
     _, _, wheel = installed
     tmp = tmp_path_factory.mktemp("venvs")
     yield tmp, wheel
@@ -168,7 +177,7 @@ def venvs(installed, tmp_path_factory):
 
 
 @pytest.mark.wheel
-def test_every_command_runs_from_a_fresh_install_without_extras(venvs):
+def test_every_command_runs_from_a_fresh_install_then_learning_with_rl_and_export_added(venvs):
     tmp, wheel = venvs
     site = Installed(_fresh_venv(tmp, wheel, "plain"), tmp / "plain_work")
     py = str(site.venv / "bin" / "python")
@@ -222,11 +231,8 @@ def test_every_command_runs_from_a_fresh_install_without_extras(venvs):
         p.name for p in (ROOT / "configs" / "sweeps").glob("*.yaml")
     )
 
-
-@pytest.mark.wheel
-def test_learning_commands_run_from_a_fresh_install_with_rl_and_export(venvs):
-    tmp, wheel = venvs
-    site = Installed(_fresh_venv(tmp, wheel, "rl", "[rl,export]"), tmp / "rl_work")
+    # [rl,export] added to the same install: the learning commands run
+    _add_extras(site.venv, tmp, wheel, "[rl,export]")
     site.ok("simulate", "--policy", SHIPPED[0], "--speed-kmh", "80", "--json", "sim.json")
     assert site.read("sim.json")["policy"] == SHIPPED[0]
     cfg = train_config(tmp, n_timesteps=256, checkpoint_every_timesteps=256)
