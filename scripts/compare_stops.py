@@ -1,7 +1,9 @@
-"""Two policies stop by stop on the same sealed stops: on how many one returns less than the
-other, and the median return change per rail (metres: the return is minus the stop's cost in
-units of 100 m). Reads the JSON of ``wsp-env benchmark --json`` (which keeps every run) or of
-``scripts/slip_target_benchmark.py --json``; the two files must hold the same stops.
+"""Two policies stop by stop on the same stops (sealed or development): on how many one returns
+less than the other, the median and mean return change per rail (metres: the return is minus
+the stop's cost in units of 100 m), and how much of the summed change its five largest gains
+carry (a mean moved by a few stops is not a typical stop's). Reads the JSON of ``wsp-env
+benchmark --json`` (which keeps every run) or of ``scripts/slip_target_benchmark.py --json``;
+the two files must hold the same stops.
 
     .venv/bin/python scripts/compare_stops.py runs/exp/bench_const425.json slip_target_4.25kmh \\
         runs/exp/bench_st_lowstd.json st_lowstd/model
@@ -52,13 +54,19 @@ def main(argv: list[str] | None = None) -> int:
         f"on {100 * np.mean(diff < 0):.0f} %, more on {100 * np.mean(diff > 0):.0f} %; "
         f"median change {100 * np.median(diff):+.1f} m, mean {100 * diff.mean():+.1f} m"
     )
+    top = np.sort(diff)[-5:]
+    if diff.sum() > 0:
+        print(
+            f"  the 5 largest gains ({', '.join(f'{100 * t:+.0f}' for t in top[::-1])} m) carry "
+            f"{100 * top.sum() / diff.sum():.0f} % of the summed change"
+        )
     by_rail: dict[str, list[float]] = {}
     for k, d in zip(keys, diff, strict=True):
         by_rail.setdefault(str(other[k]["conditions"].get("rail")), []).append(float(d))
     for rail, ds in sorted(by_rail.items()):
         print(
             f"  {rail:14s} n {len(ds):3d}  median {100 * np.median(ds):+7.1f} m  "
-            f"less on {100 * np.mean(np.array(ds) < 0):3.0f} %"
+            f"mean {100 * np.mean(ds):+8.1f} m  less on {100 * np.mean(np.array(ds) < 0):3.0f} %"
         )
     return 0
 

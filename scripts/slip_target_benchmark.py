@@ -7,7 +7,8 @@ mode uses), scored through ``evaluation.benchmark.run_benchmark`` like any other
 the same stops, sensors, watchdog and score.
 
     .venv/bin/python scripts/slip_target_benchmark.py --tier wheels+accel --target 4.25 \\
-        [--target 2 --target 6] [--runs 300] [--json runs/bench/slip_constant.json]
+        [--target 2 --target 6] [--runs 300] [--stops development] \\
+        [--json runs/bench/slip_constant.json]
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--tier", default="wheels+accel", choices=("wheels", "wheels+accel"))
     ap.add_argument("--target", type=float, action="append", help="km/h, repeatable")
     ap.add_argument("--runs", type=int, default=SEALED_RUNS)
+    ap.add_argument("--stops", choices=("sealed", "development"), default="sealed")
     ap.add_argument("--json", dest="json_path", default=None)
     args = ap.parse_args(argv)
     targets = args.target or [4.25]
@@ -34,7 +36,7 @@ def main(argv: list[str] | None = None) -> int:
         print("--target: a sliding speed in [0, 30] km/h", file=sys.stderr)
         return 2
     policies = [SlipTargetPolicy(t) for t in targets]
-    result = run_benchmark(policies, tier=args.tier, runs=args.runs,
+    result = run_benchmark(policies, tier=args.tier, runs=args.runs, stop_set=args.stops,
                            keep_runs=args.json_path is not None,
                            progress=lambda m: print(m, file=sys.stderr))  # fmt: skip
     print_benchmark(result)
