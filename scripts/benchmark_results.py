@@ -73,8 +73,9 @@ def simulate(rail: str, speed: float, grade: float, bias: float | None, policy: 
 
 
 def score_table(payload: dict[str, Any]) -> str:
+    stops = payload.get("stops", "sealed")
     lines = [
-        f"**{payload['benchmark']}** ({payload['runs']} stops of the sealed set):",
+        f"**{payload['benchmark']}** ({payload['runs']} stops of the {stops} set):",
         "",
         "| policy | score (IQM) | 95 % interval | mean normalised score | stop / classical: mean "
         "| worst | pass rate | watchdog interventions (stops) | reference error RMS [km/h] |",
@@ -105,6 +106,9 @@ def main() -> None:
     start = time.perf_counter()
     wheels = json.loads(args.wheels.read_text())
     accel = json.loads(args.accel.read_text())
+    for path, payload in ((args.wheels, wheels), (args.accel, accel)):
+        if payload.get("stops", "sealed") != "sealed":  # the results page is the sealed set's
+            raise SystemExit(f"{path}: {payload['stops']} stops, not the sealed set's results")
     rows = ["| case (seed 3301) | " + " | ".join(c for c, _, _ in COLUMNS) + " |",
             "|---|" + "---|" * len(COLUMNS)]  # fmt: skip
     for label, rail, speed, grade, bias in CASES:

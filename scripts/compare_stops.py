@@ -1,7 +1,8 @@
 """Two policies stop by stop on the same stops (sealed or development): on how many one returns
 less than the other, the median and mean return change per rail (metres: the return is minus
-the stop's cost in units of 100 m), and how much of the summed change its five largest gains
-carry (a mean moved by a few stops is not a typical stop's). Reads the JSON of ``wsp-env
+the stop's cost in units of 100 m), and how much of the summed change its (up to) five largest
+gains carry, or losses where the sum is a loss (a mean moved by a few stops is not a typical
+stop's). Reads the JSON of ``wsp-env
 benchmark --json`` (which keeps every run) or of ``scripts/slip_target_benchmark.py --json``;
 the two files must hold the same stops.
 
@@ -54,11 +55,14 @@ def main(argv: list[str] | None = None) -> int:
         f"on {100 * np.mean(diff < 0):.0f} %, more on {100 * np.mean(diff > 0):.0f} %; "
         f"median change {100 * np.median(diff):+.1f} m, mean {100 * diff.mean():+.1f} m"
     )
-    top = np.sort(diff)[-5:]
-    if diff.sum() > 0:
+    total = diff.sum()
+    side = "gains" if total > 0 else "losses"
+    top = np.sort(diff[diff > 0])[::-1][:5] if total > 0 else np.sort(diff[diff < 0])[:5]
+    if total != 0 and top.size:
         print(
-            f"  the 5 largest gains ({', '.join(f'{100 * t:+.0f}' for t in top[::-1])} m) carry "
-            f"{100 * top.sum() / diff.sum():.0f} % of the summed change"
+            f"  the largest {side} (the {top.size} most: "
+            f"{', '.join(f'{100 * t:+.0f}' for t in top)} m) carry "
+            f"{100 * top.sum() / total:.0f} % of the summed change"
         )
     by_rail: dict[str, list[float]] = {}
     for k, d in zip(keys, diff, strict=True):

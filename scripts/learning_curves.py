@@ -38,6 +38,8 @@ def read_curve(run: Path) -> tuple[np.ndarray, np.ndarray]:
         raise SystemExit(f"{path}: not a learning curve ({type(err).__name__}: {err})") from None
     if not len(rows):
         raise SystemExit(f"{path}: the curve has no point")
+    if np.any(np.diff(steps) <= 0):
+        raise SystemExit(f"{path}: the curve's steps do not increase")
     return steps, scores
 
 
@@ -49,7 +51,11 @@ def parse_group(text: str) -> tuple[str, list[Path]]:
 
 
 def summarise(curves: list[tuple[np.ndarray, np.ndarray]]) -> dict[str, Any]:
-    """The seeds' curves on the steps they share (each seed's point at or before each step)."""
+    """The seeds' curves on the steps they share (each seed's point at or before each step);
+    every curve must start at the same step (``wsp-env train`` takes its first point at 0)."""
+    firsts = {int(s[0]) for s, _ in curves}
+    if len(firsts) > 1:
+        raise SystemExit(f"the group's curves start at different steps: {sorted(firsts)}")
     last = min(int(s[-1]) for s, _ in curves)
     grid = np.unique(np.concatenate([s[s <= last] for s, _ in curves]))
     values = np.array([[sc[np.searchsorted(s, g, side="right") - 1] for g in grid]

@@ -20,7 +20,7 @@ from pathlib import Path
 
 from wsp_env.baselines.slip_target import SlipTargetPolicy
 from wsp_env.cli.printing import print_benchmark
-from wsp_env.evaluation.benchmark import SEALED_RUNS, run_benchmark
+from wsp_env.evaluation.benchmark import SEALED_RUNS, STOP_SETS, run_benchmark
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -28,7 +28,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--tier", default="wheels+accel", choices=("wheels", "wheels+accel"))
     ap.add_argument("--target", type=float, action="append", help="km/h, repeatable")
     ap.add_argument("--runs", type=int, default=SEALED_RUNS)
-    ap.add_argument("--stops", choices=("sealed", "development"), default="sealed")
+    ap.add_argument("--stops", choices=tuple(STOP_SETS), default="sealed")
     ap.add_argument("--json", dest="json_path", default=None)
     args = ap.parse_args(argv)
     targets = args.target or [4.25]

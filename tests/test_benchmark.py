@@ -16,7 +16,14 @@ from wsp_env.cli import main
 from wsp_env.core.config import configs_root, load_vehicle
 from wsp_env.envs.tiers import benchmark_env_kwargs, env_id
 from wsp_env.evaluation import expand, load_suite
-from wsp_env.evaluation.benchmark import SEALED_RUNS, iqm, run_benchmark, score, sealed_runs
+from wsp_env.evaluation.benchmark import (
+    SEALED_RUNS,
+    STOP_SETS,
+    iqm,
+    run_benchmark,
+    score,
+    sealed_runs,
+)
 from wsp_env.policy import load_callable_policy, make_policy
 
 
@@ -58,6 +65,11 @@ def test_the_sealed_set_shares_no_seed_case_or_level_with_any_suite(stop_set):
         levels.append(round(core.describe(e)["mu_contaminated"], 6))
     contaminated = [x for x, s in zip(levels, core.sim.setups, strict=True) if s.rail_name != "dry"]
     assert not suite_levels & set(contaminated)
+    drawn = [core.describe(e) for e in range(len(sealed))]  # this set's stops, before any other
+    rails = {d["rail"] for d in drawn}
+    assert rails == {"dry", "wet", "soap", "soap_etr1000", "oil", "leaves"}
+    grades = np.array([d["gradient_permille"] for d in drawn])
+    assert grades.min() < -20.0 and grades.max() > 20.0 and np.abs(grades).max() <= 25.0
     if stop_set != "sealed":  # the sealed set's levels are not the development set's
         test_levels = set()
         for e, run in enumerate(test_set):
@@ -65,11 +77,6 @@ def test_the_sealed_set_shares_no_seed_case_or_level_with_any_suite(stop_set):
             if core.sim.setups[e].rail_name != "dry":
                 test_levels.add(round(core.describe(e)["mu_contaminated"], 6))
         assert not test_levels & set(contaminated)
-    drawn = [core.describe(e) for e in range(len(sealed))]
-    rails = {d["rail"] for d in drawn}
-    assert rails == {"dry", "wet", "soap", "soap_etr1000", "oil", "leaves"}
-    grades = np.array([d["gradient_permille"] for d in drawn])
-    assert grades.min() < -20.0 and grades.max() > 20.0 and np.abs(grades).max() <= 25.0
 
 
 def test_iqm_is_the_mean_of_the_middle_half():
@@ -189,8 +196,23 @@ def test_benchmark_runs_policies_through_one_path_and_refuses_a_foreign_tier(
     dev = json.loads(out.read_text())
     assert dev["stops"] == "development" and not dev["sealed"] and payload["stops"] == "sealed"
     assert "development stops: not the sealed set" in capsys.readouterr().out
-    assert "(development stops" in (tmp_path / "dev" / "report.md").read_text()
-    assert dev["policies"]["none"]["mean_return"] != payload["policies"]["none"]["mean_return"]
+    assert "(development stops: not the sealed set" in (tmp_path / "dev" / "report.md").read_text()
+    for name in ("none", "classical"):  # the development set's first three stops, not the sealed
+        runs = dev["run_results"][name]
+        assert [r["seed"] for r in runs] == [8_260_000, 8_260_001, 8_260_002]
+        assert all(r["scenario"].startswith("dev_") for r in runs)
+    assert [r["seed"] for r in payload["run_results"]["none"]][:2] == [7_340_000, 7_340_001]
+    with pytest.raises(ValueError, match="stops: 'test' is not one of sealed, development"):
+        run_benchmark([make_policy("none")], "uic_z1", "wheels", runs=1, stop_set="test")
+    with pytest.raises(ValueError, match="stops: 'test' is not one of"):
+        sealed_runs(load_vehicle("uic_z1"), 1, stop_set="test")
+    # the command line offers exactly the library's stop sets (written out there: the parser
+    # does not import the evaluation package)
+    from wsp_env.cli import build_parser
+
+    sub = next(a for a in build_parser()._actions if a.dest == "command")
+    stops = next(a for a in sub.choices["benchmark"]._actions if a.dest == "stops")
+    assert tuple(stops.choices) == tuple(STOP_SETS)
 
 
 @pytest.mark.parametrize(

@@ -45,4 +45,11 @@ def test_bad_groups_and_runs_are_one_line(tmp_path):
     (tmp_path / "bad" / "curve.json").write_text('{"history": [{"timesteps": 0}]}')
     with pytest.raises(SystemExit, match="not a learning curve"):
         learning_curves.main(["--group", f"x={tmp_path / 'bad'}", "--out", png])
+    late = _run(tmp_path / "late", [(1000, 1.0), (2000, 1.0)])
+    early = _run(tmp_path / "early", [(0, 1.0), (2000, 1.0)])
+    with pytest.raises(SystemExit, match=r"start at different steps: \[0, 1000\]"):
+        learning_curves.main(["--group", f"x={early},{late}", "--out", png])
+    back = _run(tmp_path / "back", [(0, 1.0), (2000, 1.0), (1000, 1.0)])
+    with pytest.raises(SystemExit, match="steps do not increase"):
+        learning_curves.main(["--group", f"x={back}", "--out", png])
     assert not (tmp_path / "x.png").exists()

@@ -444,12 +444,13 @@ def _add_benchmark(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--vehicle", default="uic_z1", help="a vehicle with a benchmark id (uic_z1)")
     p.add_argument(
         "--runs", type=int, default=None,
-        help="only the sealed set's first N stops (a quick look; the score of record uses all 300)",
+        help="only the first N stops of the set (a quick look; the score of record uses all 300 "
+        "of the sealed set)",
     )  # fmt: skip
     p.add_argument(
         "--stops", choices=("sealed", "development"), default="sealed",
         help="sealed: the test set (the result of record); development: 300 other stops of the "
-        "same distribution, to diagnose and select on (sealed)",
+        "same distribution, to compare and select on (default: sealed)",
     )  # fmt: skip
     p.add_argument("--json", dest="json_path", default=None, help="write the result here")
     p.add_argument("--report", default=None, help="write report.md into this folder")

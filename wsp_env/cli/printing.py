@@ -191,14 +191,9 @@ def print_export(result: dict[str, Any]) -> None:
     )
 
 
-def stop_set_note(result: dict[str, Any]) -> str:
-    """What a benchmark result's stops are, when they are not the whole sealed set."""
-    if result.get("stops", "sealed") != "sealed":
-        return f" ({result['stops']} stops: not the sealed set, not a score of record)"
-    return "" if result["sealed"] else " (the first of the sealed set: not a score of record)"
-
-
 def print_benchmark(result: dict[str, Any]) -> None:
+    from wsp_env.evaluation.benchmark import stop_set_note
+
     print(f"{result['benchmark']}: {result['runs']} stops{stop_set_note(result)}")
     print(f"{'policy':<24} {'score':>6} {'95% interval':>15} {'stop/cls':>8} {'worst':>6} "
           f"{'pass':>5} {'watchdog':>8}")  # fmt: skip

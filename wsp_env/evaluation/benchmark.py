@@ -81,11 +81,20 @@ def sealed_runs(
     vehicle: VehicleConfig, n: int = SEALED_RUNS, stop_set: str = "sealed"
 ) -> list[Run]:
     """The first ``n`` stops of ``stop_set`` on ``vehicle``: seeds only (module docstring)."""
-    prefix = STOP_SETS[stop_set][1] if stop_set in STOP_SETS else ""
+    seeds = sealed_seeds(n, stop_set)  # checks the set and the count first
+    prefix = STOP_SETS[stop_set][1]
     return [
         Run(f"{prefix}_{i:03d}", seed, {}, dict(DAMAGE_CRITERIA), vehicle)
-        for i, seed in enumerate(sealed_seeds(n, stop_set))
+        for i, seed in enumerate(seeds)
     ]
+
+
+def stop_set_note(payload: dict[str, Any]) -> str:
+    """What a benchmark result's stops are when they are not the whole sealed set (empty when
+    they are): for its printout and its report's title."""
+    if payload.get("stops", "sealed") != "sealed":
+        return f" ({payload['stops']} stops: not the sealed set, not a score of record)"
+    return "" if payload["sealed"] else " (the first of the sealed set: not a score of record)"
 
 
 def iqm(values: np.ndarray, axis: int = -1) -> np.ndarray:

@@ -14,6 +14,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from wsp_env.core.records import RunRecord
+from wsp_env.evaluation.benchmark import stop_set_note
 from wsp_env.evaluation.plotting import plot_run
 from wsp_env.files import replace_dir_atomically
 
@@ -155,12 +156,7 @@ def benchmark_markdown(payload: dict[str, Any]) -> str:
     """The benchmark's tables (``wsp-env benchmark``'s JSON) as markdown: one row per policy,
     then per scenario family the score and the worst stop ratio."""
     lines = [
-        f"# {payload['benchmark']}: {payload['runs']} stops"
-        + (
-            ""
-            if payload["sealed"]
-            else f" ({payload.get('stops', 'sealed')} stops, not the whole sealed set)"
-        ),
+        f"# {payload['benchmark']}: {payload['runs']} stops" + stop_set_note(payload),
         "",
         f"Score: {payload['score_definition']}.",
         "",
