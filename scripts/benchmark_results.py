@@ -73,9 +73,8 @@ def simulate(rail: str, speed: float, grade: float, bias: float | None, policy: 
 
 
 def score_table(payload: dict[str, Any]) -> str:
-    stops = payload.get("stops", "sealed")
     lines = [
-        f"**{payload['benchmark']}** ({payload['runs']} stops of the {stops} set):",
+        f"**{payload['benchmark']}** ({payload['runs']} stops of the sealed set):",
         "",
         "| policy | score (IQM) | 95 % interval | mean normalised score | stop / classical: mean "
         "| worst | pass rate | watchdog interventions (stops) | reference error RMS [km/h] |",

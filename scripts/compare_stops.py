@@ -2,9 +2,8 @@
 less than the other, the median and mean return change per rail (metres: the return is minus
 the stop's cost in units of 100 m), and how much of the summed change its (up to) five largest
 gains carry, or losses where the sum is a loss (a mean moved by a few stops is not a typical
-stop's). Reads the JSON of ``wsp-env
-benchmark --json`` (which keeps every run) or of ``scripts/slip_target_benchmark.py --json``;
-the two files must hold the same stops.
+stop's). Reads the JSON of ``wsp-env benchmark --json`` (which keeps every run) or of
+``scripts/slip_target_benchmark.py --json``; the two files must hold the same stops.
 
     .venv/bin/python scripts/compare_stops.py runs/exp/bench_const425.json slip_target_4.25kmh \\
         runs/exp/bench_st_lowstd.json st_lowstd/model

@@ -231,10 +231,9 @@ def run_benchmark(
     from wsp_env.policy import NoWSP, check_sensor_tier, make_policy
 
     check_tier(tier)
-    if stop_set not in STOP_SETS:
-        raise ValueError(f"stops: {stop_set!r} is not one of {', '.join(STOP_SETS)}")
     kwargs = benchmark_env_kwargs(vehicle, tier)
     veh = load_vehicle(kwargs.pop("vehicle"))
+    stops = sealed_runs(veh, runs, stop_set)  # refuses an unknown set or count before any run
     max_time_s = kwargs.pop("max_time_s")
     builtin = {"none": NoWSP, "classical": ClassicalWSP, "oracle": Oracle}
     for p in policies:
@@ -256,7 +255,6 @@ def run_benchmark(
     names = [p.name for p in policies]
     ends = {"none": make_policy("none"), "classical": make_policy("classical", tier=tier)}
     todo = [ends[n] for n in ("none", "classical") if n not in names] + list(policies)
-    stops = sealed_runs(veh, runs, stop_set)
     results: dict[str, list[dict[str, Any]]] = {}
     for p in todo:
         if progress is not None:
