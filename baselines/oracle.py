@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 from numba import njit
 
+from wsp_env.baselines.slip_target import SlipTargetPolicy
 from wsp_env.physics import layout as L
 from wsp_env.physics.adhesion import adhesion, peak_adhesion
 from wsp_env.physics.brake import pad_factor, pressure_for_torque
@@ -187,3 +188,75 @@ class Oracle:
             return (not damage_ok, r["stopping_distance_m"])
 
         return min(candidates, key=key)
+
+
+# Per-rail constant targets (km/h of measured slip) of ``SlipTargetTeacher``: the best of
+# 1, 2, 3, 4.25, 6 and 8 km/h by each rail's mean return on the benchmark's 300 development stops
+# (``scripts/slip_target_benchmark.py --stops development``, wheels+accel), never the sealed set.
+RAIL_TARGETS_KMH: dict[str, float] = {
+    "dry": 8.0, "wet": 8.0, "leaves": 2.0, "oil": 3.0, "soap": 4.25, "soap_etr1000": 4.25,
+}  # fmt: skip
+DEFAULT_TARGET_KMH = 4.25  # a rail not in the table: the slip-target mode's middle action
+
+
+class SlipTargetTeacher:
+    """A privileged teacher in the slip-target action space (``action_mode="slip_target"``),
+    for imitation (``training/imitation.py``, teacher ``oracle_target_rail``): every valve of a
+    stop asks for one constant measured sliding speed, picked by the stop's rail, which the
+    simulator knows and no sensor measures (``RAIL_TARGETS_KMH``; a rail not in the table:
+    ``DEFAULT_TARGET_KMH``). A student must infer the rail from how its wheels behave.
+
+    ``targets_kmh()`` gives the targets (``(n_envs, n_valves)``); ``act`` the environment's
+    actions for them, ``2 (s* - s_min) / (s_max - s_min) - 1`` on the core's range, clipped."""
+
+    name = "oracle_target_rail"
+    privileged = True
+
+    def __init__(self, targets_kmh: dict[str, float] | None = None) -> None:
+        self.table = dict(RAIL_TARGETS_KMH if targets_kmh is None else targets_kmh)
+
+    def bind(self, core: Any) -> None:
+        self.core = core
+        self.lo = float(getattr(core, "slip_target_min_kmh", 0.5))
+        self.hi = float(getattr(core, "slip_target_max_kmh", 8.0))
+        self.valve_starts = np.flatnonzero(np.r_[True, np.diff(core.valve_of_axle) != 0])
+        self._rail = np.full(core.n_envs, DEFAULT_TARGET_KMH)
+
+    def reset(self, env_ids: np.ndarray) -> None:
+        setups = self.core.sim.setups
+        for e in np.asarray(env_ids, dtype=int).reshape(-1):  # once a stop, not a step
+            s = setups[e]
+            name = s.rail_name if s is not None else ""
+            self._rail[e] = self.table.get(name, DEFAULT_TARGET_KMH)
+
+    def targets_kmh(self) -> np.ndarray:
+        return np.repeat(self._rail[:, None], len(self.valve_starts), axis=1)
+
+    def act(self, obs: np.ndarray) -> np.ndarray:
+        t = self.targets_kmh()
+        return np.clip(2.0 * (t - self.lo) / (self.hi - self.lo) - 1.0, -1.0, 1.0).astype(
+            np.float32
+        )
+
+
+class SlipTargetOracle(SlipTargetPolicy):
+    """``SlipTargetTeacher``'s targets tracked by the slip-target inner loop, as a policy for any
+    continuous-action environment: ``SlipTargetPolicy`` whose constant target is the teacher's
+    for each stop, so the teacher runs through the same code path as every other controller
+    (``scripts/slip_target_benchmark.py --rail-teacher``)."""
+
+    privileged = True
+
+    def __init__(self, teacher: SlipTargetTeacher | None = None) -> None:
+        super().__init__(DEFAULT_TARGET_KMH)
+        self.teacher = teacher or SlipTargetTeacher()
+        self.name = self.teacher.name
+
+    def bind(self, core: Any) -> None:
+        super().bind(core)
+        self.teacher.bind(core)
+
+    def reset(self, env_ids: np.ndarray) -> None:
+        super().reset(env_ids)
+        self.teacher.reset(env_ids)
+        self.target[env_ids] = self.teacher.targets_kmh()[env_ids]

@@ -8,7 +8,11 @@ the same stops, sensors, watchdog and score.
 
     .venv/bin/python scripts/slip_target_benchmark.py --tier wheels+accel --target 4.25 \\
         [--target 2 --target 6] [--runs 300] [--stops development] \\
-        [--json runs/bench/slip_constant.json]
+        [--json runs/bench/slip_constant.json] [--rail-teacher]
+
+``--rail-teacher`` adds ``baselines.oracle.SlipTargetOracle``: the privileged teacher of the
+imitation start (``oracle_target_rail``: each stop's constant target picked by its rail, which
+the sensors do not measure), through the same loop.
 """
 
 from __future__ import annotations
@@ -18,6 +22,7 @@ import json
 import sys
 from pathlib import Path
 
+from wsp_env.baselines.oracle import SlipTargetOracle
 from wsp_env.baselines.slip_target import SlipTargetPolicy
 from wsp_env.cli.printing import print_benchmark
 from wsp_env.evaluation.benchmark import SEALED_RUNS, STOP_SETS, run_benchmark
@@ -30,12 +35,19 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--runs", type=int, default=SEALED_RUNS)
     ap.add_argument("--stops", choices=tuple(STOP_SETS), default="sealed")
     ap.add_argument("--json", dest="json_path", default=None)
+    ap.add_argument(
+        "--rail-teacher",
+        action="store_true",
+        help="also the privileged oracle_target_rail (one target a stop by its rail)",
+    )
     args = ap.parse_args(argv)
     targets = args.target or [4.25]
     if any(not 0.0 <= t <= 30.0 for t in targets):
         print("--target: a sliding speed in [0, 30] km/h", file=sys.stderr)
         return 2
     policies = [SlipTargetPolicy(t) for t in targets]
+    if args.rail_teacher:
+        policies.append(SlipTargetOracle())
     result = run_benchmark(policies, tier=args.tier, runs=args.runs, stop_set=args.stops,
                            keep_runs=args.json_path is not None,
                            progress=lambda m: print(m, file=sys.stderr))  # fmt: skip

@@ -81,6 +81,9 @@ def test_pretraining_moves_the_student_toward_the_teacher(tmp_path):
         ({"pretrain": {**PRETRAIN, "rounds": 0}}, "pretrain.rounds"),
         ({"pretrain": {**PRETRAIN, "steps_per_round": 4}}, "pretrain.steps_per_round"),
         ({"pretrain": PRETRAIN, "env_kwargs": {"action_mode": "residual"}}, "pretrain"),
+        # a valve-fraction teacher on slip targets, a slip-target teacher on valve fractions
+        ({"pretrain": PRETRAIN, "env_kwargs": {"action_mode": "slip_target"}}, "pretrain"),
+        ({"pretrain": {**PRETRAIN, "teacher": "oracle_target_rail"}}, "pretrain.teacher"),
     ],
 )
 def test_bad_pretrain_block_is_one_line(tmp_path, capsys, changes, field):
@@ -197,3 +200,69 @@ def test_anchor_pull_decays_and_a_chunked_handover_resumes_bit_for_bit(tmp_path)
                  "--chunk-timesteps", "512"]) == 0  # fmt: skip
     assert main(["train", "--resume", str(part), "--out", str(rest), "--no-progress"]) == 0
     assert same_params(model_params(one / "model.zip"), model_params(rest / "model.zip"))
+
+
+def test_rail_target_teacher_is_the_constant_target_of_its_rail():
+    """oracle_target_rail through the slip-target loop is, stop by stop and bit for bit, the
+    constant target ``RAIL_TARGETS_KMH`` names for the stop's rail; its actions are those
+    targets on the slip-target mode's scale (a = 0: 4.25 km/h of 0.5-8)."""
+    from wsp_env.baselines.oracle import RAIL_TARGETS_KMH, SlipTargetOracle, SlipTargetTeacher
+    from wsp_env.baselines.slip_target import SlipTargetPolicy
+    from wsp_env.evaluation import CaseConfig, SuiteConfig, run_suite
+
+    assert RAIL_TARGETS_KMH["leaves"] != RAIL_TARGETS_KMH["soap"]  # else this proves little
+    for rail, mu in (("soap", 0.08), ("leaves", 0.05)):
+        case = CaseConfig(name=rail, rail=rail, mu_contaminated=mu, pattern="uniform",
+                          speeds_kmh=("80",))  # fmt: skip
+        suite = SuiteConfig(name="t", description="", seeds=(3,), cases=(case,))
+        (own,), _ = run_suite("uic_z1", suite, SlipTargetOracle(), record="none")
+        const = SlipTargetPolicy(RAIL_TARGETS_KMH[rail])
+        (ref,), _ = run_suite("uic_z1", suite, const, record="none")
+        assert own["stopping_distance_m"] == ref["stopping_distance_m"]
+        assert own["sliding_energy_kJ"] == ref["sliding_energy_kJ"]
+    core = make_core(3, vehicle="uic_z1", action_mode="slip_target")
+    teacher = SlipTargetTeacher({"soap": 4.25, "leaves": 2.0, "oil": 8.0})
+    teacher.bind(core)
+    for e, rail in enumerate(("soap", "leaves", "oil")):
+        core.reset_env(e, {"rail": rail})
+    teacher.reset(np.arange(3))
+    assert np.allclose(teacher.act(core.obs), [[0.0] * 4, [-0.6] * 4, [1.0] * 4])
+
+
+def test_slip_target_student_is_saved_as_handed_over(tmp_path):
+    """A slip-target learner (action repeat 4) warm-started by oracle_target_rail: the fit
+    halves its distance to the teacher's targets, and ``student.zip`` is the imitation start
+    as handed over (what RL then moves away from: ``model.zip``)."""
+    env_kwargs = {
+        "vehicle": "uic_z1",
+        "accelerometer": True,
+        "action_mode": "slip_target",
+        "action_repeat": 4,
+        "memory_features": True,
+        "scenario": {"speed_kmh": [30, 50], "rails": {"soap": 0.5, "leaves": 0.5}},
+    }
+    pre = {**PRETRAIN, "teacher": "oracle_target_rail", "steps_per_round": 2048,
+           "warmup_steps": 512}  # fmt: skip
+    cfg = train_config(
+        tmp_path,
+        n_timesteps=256,
+        env_kwargs=env_kwargs,
+        policy_kwargs={"net_arch": [32, 32]},
+        pretrain=pre,
+        learning_rate=3e-4,
+    )  # a constant learning rate: lin_ would end at 0 after the one update
+    out = tmp_path / "run"
+    assert main(["train", "--config", str(cfg), "--out", str(out), "--no-progress"]) == 0
+    record = json.loads((out / "pretrain.json").read_text())
+    assert record["teacher"] == "oracle_target_rail"
+    first = record["rounds"][0]
+    assert first["data_mae_after_fit"] < 0.5 * first["data_mae_before_fit"]
+    student = SB3Policy(out / "student.zip")
+    assert student.env_kwargs["action_mode"] == "slip_target"
+    final = SB3Policy(out / "model.zip")
+    moved = [
+        not np.array_equal(a, b)
+        for a, b in zip(student.model.policy.state_dict().values(),
+                        final.model.policy.state_dict().values(), strict=True)
+    ]  # fmt: skip
+    assert any(moved)  # PPO moved it; the student file kept the start

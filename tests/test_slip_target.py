@@ -367,9 +367,9 @@ def test_training_config_and_trained_model_carry_the_mode(tmp_path):
 
 
 def test_constant_targets_are_scored_on_the_sealed_set_like_any_controller(tmp_path, capsys):
-    """``scripts/slip_target_benchmark.py``: a constant target goes through ``run_benchmark``
-    (the same stops, sensors, watchdog and score as every controller), on a tiny slice of the
-    sealed set; a target out of range is one line."""
+    """``scripts/slip_target_benchmark.py``: a constant target (and the rail teacher) goes
+    through ``run_benchmark`` (the same stops, sensors, watchdog and score as every controller),
+    on a tiny slice of the sealed set; a target out of range is one line."""
     import json
     import sys
     from pathlib import Path
@@ -380,11 +380,12 @@ def test_constant_targets_are_scored_on_the_sealed_set_like_any_controller(tmp_p
     finally:
         sys.path.pop(0)
     out = tmp_path / "b.json"
-    assert stb.main(["--target", "4.25", "--runs", "4", "--json", str(out)]) == 0
+    assert stb.main(["--target", "4.25", "--runs", "4", "--json", str(out), "--rail-teacher"]) == 0
     result = json.loads(out.read_text())
     assert result["runs"] == 4 and not result["sealed"]
     p = result["policies"]["slip_target_4.25kmh"]
-    assert set(result["policies"]) == {"none", "classical", "slip_target_4.25kmh"}
+    names = {"none", "classical", "slip_target_4.25kmh", "oracle_target_rail"}
+    assert set(result["policies"]) == names
     assert p["score"] is not None and 0.0 < p["score"] < 2.0  # between locked wheels and beyond
     assert "slip_target_4.25kmh" in capsys.readouterr().out
     assert stb.main(["--target", "-1"]) == 2

@@ -244,7 +244,7 @@ def parse_train_config(data: Any, source: str = "") -> TrainConfig:
         )
     pretrain_cfg = None
     if data.get("pretrain") is not None:
-        from wsp_env.training.imitation import PretrainConfig
+        from wsp_env.training.imitation import TARGET_TEACHERS, PretrainConfig
 
         pretrain_cfg = from_dict(PretrainConfig, data.pop("pretrain"), "pretrain")
         if pretrain_cfg.steps_per_round < n_envs:
@@ -254,12 +254,21 @@ def parse_train_config(data: Any, source: str = "") -> TrainConfig:
             raise ConfigError(
                 f"pretrain: a warm start of the actor-critic of ppo or a2c, not {algo}"
             )
-        if env_kwargs.get("action_repeat", 1) != 1:
-            raise ConfigError("pretrain: the teacher acts every control period; drop "
-                              "env_kwargs.action_repeat or the warm start")  # fmt: skip
-        if env_kwargs.get("action_mode", "continuous") != "continuous":
-            raise ConfigError("pretrain: needs env_kwargs.action_mode continuous (the teacher's "
-                              "actions are valve fractions)")  # fmt: skip
+        mode = env_kwargs.get("action_mode", "continuous")
+        if pretrain_cfg.teacher in TARGET_TEACHERS:
+            if mode != "slip_target":
+                raise ConfigError(
+                    f"pretrain.teacher: {pretrain_cfg.teacher} gives slip targets; needs "
+                    f"env_kwargs.action_mode slip_target, not {mode}"
+                )
+        else:
+            if env_kwargs.get("action_repeat", 1) != 1:
+                raise ConfigError("pretrain: the teacher acts every control period; drop "
+                                  "env_kwargs.action_repeat or the warm start")  # fmt: skip
+            if mode != "continuous":
+                raise ConfigError(f"pretrain: needs env_kwargs.action_mode continuous (the "
+                                  f"teacher's actions are valve fractions), not {mode}; "
+                                  f"oracle_target_rail teaches slip targets")  # fmt: skip
     data.pop("pretrain", None)
     every = _int(data.pop("checkpoint_every_timesteps", 1_000_000), "checkpoint_every_timesteps")
     try:

@@ -3,7 +3,11 @@ own (non-privileged) observations, DAgger-style, before reinforcement learning s
 
 The teacher sees what no WSP measures (``baselines/oracle.py``: ``oracle_peak`` holds every axle
 at the peak of its current adhesion curve from the simulator's true state, ``oracle_rail`` does
-that where the rail does not recover and holds a 4 km/h slide where it does); the student sees the
+that where the rail does not recover and holds a 4 km/h slide where it does; both command valve
+fractions, every control period, so the learner's environment must be ``continuous`` without an
+action repeat. ``oracle_target_rail`` acts in the ``slip_target`` action space instead, one
+target sliding speed a stop picked by its rail, for a learner on that mode, any repeat); the
+student sees the
 observation the environment gives it (wheel speeds, decelerations, pressures, the reference
 speed, an accelerometer if configured), normalised and frame-stacked exactly as the learner
 will see it. Rounds (Ross, Gordon & Bagnell 2011, DAgger): in round 0 the teacher drives; in
@@ -40,7 +44,9 @@ from typing import Any
 
 import numpy as np
 
-TEACHERS = ("oracle_peak", "oracle_rail", "classical")
+TEACHERS = ("oracle_peak", "oracle_rail", "classical", "oracle_target_rail")
+# teachers whose actions are slip targets (``action_mode="slip_target"``), not valve fractions
+TARGET_TEACHERS = ("oracle_target_rail",)
 
 
 @dataclass(frozen=True)
@@ -73,6 +79,10 @@ def make_teacher(name: str) -> Any:
         from wsp_env.baselines.oracle import RailAwareTracker
 
         return RailAwareTracker()
+    if name == "oracle_target_rail":
+        from wsp_env.baselines.oracle import SlipTargetTeacher
+
+        return SlipTargetTeacher()
     from wsp_env.baselines.classical import ClassicalWSP, load_wsp_config
 
     return ClassicalWSP(load_wsp_config())

@@ -647,6 +647,9 @@ def _train(
             pretrained = pretrain(model, env, _braking_core(venv), cfg.pretrain, gamma)
             pretrained["wall_time_s"] = time.perf_counter() - t0
             pretrained["validation"] = validator.evaluate(model)  # the warm start, at step 0
+            # the imitation start as handed over, beside what RL makes of it (``model``,
+            # ``best_model``): item 4 of issue 23 compares the two on the benchmark
+            save_policy_files(model, out / "student", cfg)
             write_json(out / "pretrain.json", pretrained)
         handover = None
         if cfg.pretrain is not None:  # the RL side of the hand-over (imitation.HandOver)
