@@ -206,8 +206,8 @@ class SlipTargetTeacher:
     simulator knows and no sensor measures (``RAIL_TARGETS_KMH``; a rail not in the table:
     ``DEFAULT_TARGET_KMH``). A student must infer the rail from how its wheels behave.
 
-    ``targets_kmh()`` gives the targets (``(n_envs, n_valves)``); ``act`` the environment's
-    actions for them, ``2 (s* - s_min) / (s_max - s_min) - 1`` on the core's range, clipped."""
+    ``targets_kmh()`` gives the targets (``(n_envs, n_valves)``, clipped to the core's range);
+    ``act`` the environment's actions for them, ``2 (s* - s_min) / (s_max - s_min) - 1``."""
 
     name = "oracle_target_rail"
     privileged = True
@@ -219,7 +219,6 @@ class SlipTargetTeacher:
         self.core = core
         self.lo = float(getattr(core, "slip_target_min_kmh", 0.5))
         self.hi = float(getattr(core, "slip_target_max_kmh", 8.0))
-        self.valve_starts = np.flatnonzero(np.r_[True, np.diff(core.valve_of_axle) != 0])
         self._rail = np.full(core.n_envs, DEFAULT_TARGET_KMH)
 
     def reset(self, env_ids: np.ndarray) -> None:
@@ -230,13 +229,13 @@ class SlipTargetTeacher:
             self._rail[e] = self.table.get(name, DEFAULT_TARGET_KMH)
 
     def targets_kmh(self) -> np.ndarray:
-        return np.repeat(self._rail[:, None], len(self.valve_starts), axis=1)
+        """Each valve's target (km/h of measured slip), within the core's range."""
+        t = np.clip(self._rail, self.lo, self.hi)
+        return np.repeat(t[:, None], self.core.n_valves, axis=1)
 
     def act(self, obs: np.ndarray) -> np.ndarray:
         t = self.targets_kmh()
-        return np.clip(2.0 * (t - self.lo) / (self.hi - self.lo) - 1.0, -1.0, 1.0).astype(
-            np.float32
-        )
+        return (2.0 * (t - self.lo) / (self.hi - self.lo) - 1.0).astype(np.float32)
 
 
 class SlipTargetOracle(SlipTargetPolicy):

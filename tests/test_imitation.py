@@ -82,8 +82,14 @@ def test_pretraining_moves_the_student_toward_the_teacher(tmp_path):
         ({"pretrain": {**PRETRAIN, "steps_per_round": 4}}, "pretrain.steps_per_round"),
         ({"pretrain": PRETRAIN, "env_kwargs": {"action_mode": "residual"}}, "pretrain"),
         # a valve-fraction teacher on slip targets, a slip-target teacher on valve fractions
-        ({"pretrain": PRETRAIN, "env_kwargs": {"action_mode": "slip_target"}}, "pretrain"),
-        ({"pretrain": {**PRETRAIN, "teacher": "oracle_target_rail"}}, "pretrain.teacher"),
+        (
+            {
+                "pretrain": PRETRAIN,
+                "env_kwargs": {"action_mode": "slip_target", "action_repeat": 4},
+            },
+            "valve fractions), not slip_target",
+        ),
+        ({"pretrain": {**PRETRAIN, "teacher": "oracle_target_rail"}}, "gives slip targets"),
     ],
 )
 def test_bad_pretrain_block_is_one_line(tmp_path, capsys, changes, field):
@@ -206,12 +212,17 @@ def test_rail_target_teacher_is_the_constant_target_of_its_rail():
     """oracle_target_rail through the slip-target loop is, stop by stop and bit for bit, the
     constant target ``RAIL_TARGETS_KMH`` names for the stop's rail; its actions are those
     targets on the slip-target mode's scale (a = 0: 4.25 km/h of 0.5-8)."""
-    from wsp_env.baselines.oracle import RAIL_TARGETS_KMH, SlipTargetOracle, SlipTargetTeacher
+    from wsp_env.baselines.oracle import (
+        DEFAULT_TARGET_KMH,
+        RAIL_TARGETS_KMH,
+        SlipTargetOracle,
+        SlipTargetTeacher,
+    )
     from wsp_env.baselines.slip_target import SlipTargetPolicy
     from wsp_env.evaluation import CaseConfig, SuiteConfig, run_suite
 
-    assert RAIL_TARGETS_KMH["leaves"] != RAIL_TARGETS_KMH["soap"]  # else this proves little
-    for rail, mu in (("soap", 0.08), ("leaves", 0.05)):
+    for rail, mu in (("oil", 0.06), ("leaves", 0.05)):
+        assert RAIL_TARGETS_KMH[rail] != DEFAULT_TARGET_KMH  # else this proves little
         case = CaseConfig(name=rail, rail=rail, mu_contaminated=mu, pattern="uniform",
                           speeds_kmh=("80",))  # fmt: skip
         suite = SuiteConfig(name="t", description="", seeds=(3,), cases=(case,))
@@ -221,28 +232,53 @@ def test_rail_target_teacher_is_the_constant_target_of_its_rail():
         assert own["stopping_distance_m"] == ref["stopping_distance_m"]
         assert own["sliding_energy_kJ"] == ref["sliding_energy_kJ"]
     core = make_core(3, vehicle="uic_z1", action_mode="slip_target")
-    teacher = SlipTargetTeacher({"soap": 4.25, "leaves": 2.0, "oil": 8.0})
+    teacher = SlipTargetTeacher({"soap": 4.25, "leaves": 2.0, "oil": 9.0})
     teacher.bind(core)
     for e, rail in enumerate(("soap", "leaves", "oil")):
         core.reset_env(e, {"rail": rail})
     teacher.reset(np.arange(3))
+    # 9 km/h is beyond the mode's 8: clipped to its range, in the targets and the actions
+    assert np.allclose(teacher.targets_kmh(), [[4.25] * 4, [2.0] * 4, [8.0] * 4])
     assert np.allclose(teacher.act(core.obs), [[0.0] * 4, [-0.6] * 4, [1.0] * 4])
 
 
-def test_slip_target_student_is_saved_as_handed_over(tmp_path):
-    """A slip-target learner (action repeat 4) warm-started by oracle_target_rail: the fit
-    halves its distance to the teacher's targets, and ``student.zip`` is the imitation start
-    as handed over (what RL then moves away from: ``model.zip``)."""
+def test_slip_target_student_is_the_imitation_start_handed_over(tmp_path):
+    """A slip-target learner (action repeat 4, staggered starts) warm-started by
+    oracle_target_rail: the fit halves its distance to the teacher's targets; every stop the
+    DAgger rounds drive is labelled with its own rail's target (the teacher is reset on each
+    autoreset: a leaves stop after a soap stop is not taught 4.25 km/h); and ``student.zip`` is
+    exactly the start the hand-over pulls towards (the anchor), not what RL made of it."""
+    import torch
+
+    from wsp_env.training import imitation
+
     env_kwargs = {
         "vehicle": "uic_z1",
         "accelerometer": True,
         "action_mode": "slip_target",
         "action_repeat": 4,
         "memory_features": True,
+        "stagger_reset_steps": 20,
         "scenario": {"speed_kmh": [30, 50], "rails": {"soap": 0.5, "leaves": 0.5}},
     }
+    labels = []  # (rail of the stop, label) at every teacher call
+    real = imitation.make_teacher
+
+    def spy(name):
+        teacher = real(name)
+        act = teacher.act
+
+        def recorded(obs):
+            out = act(obs)
+            rails = [s.rail_name for s in teacher.core.sim.setups]
+            labels.extend(zip(rails, out[:, 0].tolist(), strict=True))
+            return out
+
+        teacher.act = recorded
+        return teacher
+
     pre = {**PRETRAIN, "teacher": "oracle_target_rail", "steps_per_round": 2048,
-           "warmup_steps": 512}  # fmt: skip
+           "warmup_steps": 512, "anchor_coef": 1.0, "anchor_timesteps": 256}  # fmt: skip
     cfg = train_config(
         tmp_path,
         n_timesteps=256,
@@ -252,17 +288,22 @@ def test_slip_target_student_is_saved_as_handed_over(tmp_path):
         learning_rate=3e-4,
     )  # a constant learning rate: lin_ would end at 0 after the one update
     out = tmp_path / "run"
-    assert main(["train", "--config", str(cfg), "--out", str(out), "--no-progress"]) == 0
+    imitation.make_teacher = spy
+    try:
+        assert main(["train", "--config", str(cfg), "--out", str(out), "--no-progress"]) == 0
+    finally:
+        imitation.make_teacher = real
+    want = {"soap": 0.0, "leaves": -0.6}  # 4.25 and 2 km/h on the 0.5-8 scale
+    assert {r for r, _ in labels} == {"soap", "leaves"}
+    assert all(abs(a - want[r]) < 1e-6 for r, a in labels)
     record = json.loads((out / "pretrain.json").read_text())
     assert record["teacher"] == "oracle_target_rail"
     first = record["rounds"][0]
     assert first["data_mae_after_fit"] < 0.5 * first["data_mae_before_fit"]
     student = SB3Policy(out / "student.zip")
     assert student.env_kwargs["action_mode"] == "slip_target"
-    final = SB3Policy(out / "model.zip")
-    moved = [
-        not np.array_equal(a, b)
-        for a, b in zip(student.model.policy.state_dict().values(),
-                        final.model.policy.state_dict().values(), strict=True)
-    ]  # fmt: skip
-    assert any(moved)  # PPO moved it; the student file kept the start
+    start = _state(out)["handover"]["anchor"]
+    own = student.model.policy.state_dict()
+    assert all(torch.equal(start[k], own[k]) for k in start)
+    final = SB3Policy(out / "model.zip").model.policy.state_dict()
+    assert not all(torch.equal(own[k], final[k]) for k in own)  # RL moved; the file kept the start

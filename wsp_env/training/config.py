@@ -262,13 +262,13 @@ def parse_train_config(data: Any, source: str = "") -> TrainConfig:
                     f"env_kwargs.action_mode slip_target, not {mode}"
                 )
         else:
-            if env_kwargs.get("action_repeat", 1) != 1:
-                raise ConfigError("pretrain: the teacher acts every control period; drop "
-                                  "env_kwargs.action_repeat or the warm start")  # fmt: skip
             if mode != "continuous":
                 raise ConfigError(f"pretrain: needs env_kwargs.action_mode continuous (the "
                                   f"teacher's actions are valve fractions), not {mode}; "
                                   f"oracle_target_rail teaches slip targets")  # fmt: skip
+            if env_kwargs.get("action_repeat", 1) != 1:
+                raise ConfigError("pretrain: the teacher acts every control period; drop "
+                                  "env_kwargs.action_repeat or the warm start")  # fmt: skip
     data.pop("pretrain", None)
     every = _int(data.pop("checkpoint_every_timesteps", 1_000_000), "checkpoint_every_timesteps")
     try:

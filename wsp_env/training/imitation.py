@@ -3,19 +3,19 @@ own (non-privileged) observations, DAgger-style, before reinforcement learning s
 
 The teacher sees what no WSP measures (``baselines/oracle.py``: ``oracle_peak`` holds every axle
 at the peak of its current adhesion curve from the simulator's true state, ``oracle_rail`` does
-that where the rail does not recover and holds a 4 km/h slide where it does; both command valve
-fractions, every control period, so the learner's environment must be ``continuous`` without an
-action repeat. ``oracle_target_rail`` acts in the ``slip_target`` action space instead, one
-target sliding speed a stop picked by its rail, for a learner on that mode, any repeat); the
-student sees the
-observation the environment gives it (wheel speeds, decelerations, pressures, the reference
-speed, an accelerometer if configured), normalised and frame-stacked exactly as the learner
-will see it. Rounds (Ross, Gordon & Bagnell 2011, DAgger): in round 0 the teacher drives; in
-later rounds the student drives (deterministic) and the teacher labels the states the student
-reaches; the actor is refitted on everything gathered so far after each round. The critic is
-fitted to the discounted (normalised) returns of the last round's rollouts, bootstrapped at the
-round's end by its own value of the state reached (a stop of 15,000 steps is not cut to the
-round's 4,096), so that the first policy-gradient updates see sensible advantages.
+that where the rail does not recover and holds a 4 km/h slide where it does; they and
+``classical`` command valve fractions every control period, so the learner's environment must
+be ``continuous`` without an action repeat; ``oracle_target_rail`` acts in the ``slip_target``
+action space instead, one target sliding speed a stop picked by its rail, for a learner on
+that mode, any repeat); the student sees the observation the environment gives it (wheel
+speeds, decelerations, pressures, the reference speed, an accelerometer if configured),
+normalised and frame-stacked exactly as the learner will see it. Rounds (Ross, Gordon &
+Bagnell 2011, DAgger): in round 0 the teacher drives; in later rounds the student drives
+(deterministic) and the teacher labels the states the student reaches; the actor is refitted
+on everything gathered so far after each round. The critic is fitted to the discounted
+(normalised) returns of the last round's rollouts, bootstrapped at the round's end by its own
+value of the state reached (a stop of 15,000 steps is not cut to the round's 4,096), so that
+the first policy-gradient updates see sensible advantages.
 
 **The hand-over** (issue 23: the fine-tune of the first shipped student collapsed):
 

@@ -33,7 +33,9 @@ each reward term next to SB3's own. A fixed seed reproduces a run.
 **Output folder**: ``config.yaml`` (the exact config, seed included), ``model.zip`` +
 ``model.vecnormalize.pkl`` (final), ``best_model.zip`` + ``best_model.vecnormalize.pkl``,
 ``checkpoints/step_N/``, ``validation.json`` (every evaluation), ``curve.json`` (the
-learning curve), ``logs/from_step_N/`` (each
+learning curve); with ``pretrain:``, ``pretrain.json`` (each imitation round) and
+``student.zip`` + ``student.vecnormalize.pkl`` (the imitation start as handed over to RL);
+``logs/from_step_N/`` (each
 call's TensorBoard events and CSV), ``progress.csv`` (all calls' CSV rows), ``train.json`` (the
 result, DESIGN §8).
 """
