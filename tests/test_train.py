@@ -177,7 +177,9 @@ def test_normalisation_is_found_under_any_checkpoint_name(ppo_run, tmp_path):
 RECURRENT = {"algo": "recurrent_ppo", "policy_kwargs": {"net_arch": [16], "lstm_hidden_size": 8}}
 
 
-@pytest.mark.parametrize("kind", ["ppo", "sac", "frame_stack", "recurrent_ppo", "time_limit"])
+@pytest.mark.parametrize(
+    "kind", ["ppo", "sac", "frame_stack", "recurrent_ppo", "time_limit", "stop_weight"]
+)
 def test_resume_in_chunks_is_bit_for_bit(tmp_path, kind):
     """A run stopped half way (--chunk-timesteps) and resumed ends with exactly the weights
     and normalisation of the run trained in one go: the schedules follow the run's total, the
@@ -201,6 +203,10 @@ def test_resume_in_chunks_is_bit_for_bit(tmp_path, kind):
         "recurrent_ppo": lambda: train_config(tmp_path, **RECURRENT),
         "time_limit": lambda: train_config(tmp_path, env_kwargs={
             "vehicle": "uic_z1", "scenario": {"speed_kmh": [30, 40]}, "max_time_s": 1.0}),
+        # the per-stop weights of the stops under way come back from the restored scenarios
+        "stop_weight": lambda: train_config(tmp_path, stop_weight={"reference_m": 50.0},
+            env_kwargs={"vehicle": "uic_z1", "scenario": {"speed_kmh": [30, 40],
+                        "gradient_permille": [-20, 20]}, "max_time_s": 1.0}),
     }[kind]()  # fmt: skip
     # ppo: the chunk ends past a curve point (300) that the one-go run takes at its next
     # rollout's start, at the same step
@@ -233,6 +239,9 @@ def test_resume_in_chunks_is_bit_for_bit(tmp_path, kind):
     with (rest / "progress.csv").open(newline="") as fh:
         steps = [int(float(r["time/total_timesteps"])) for r in csv.DictReader(fh)]
     assert steps == sorted(set(steps)) and (kind == "sac" or steps[-1] > int(half))
+    if kind == "stop_weight":  # the run was weighted, and says so
+        saved = yaml.safe_load((rest / "config.yaml").read_text())
+        assert saved["stop_weight"]["reference_m"] == 50.0
     if kind == "time_limit":  # the stops that straddle the resume count their whole length
         with (
             (one / "progress.csv").open(newline="") as a,
@@ -346,6 +355,10 @@ def test_discrete_models_are_evaluated_in_discrete_mode(tmp_path):
             "env_kwargs.reward.shaping_gamma",
         ),
         ({"algo": "sac", "frame_stack": 3}, "frame_stack: 3 with normalize is not supported"),
+        ({"stop_weight": {"reference_m": -1.0}}, "stop_weight.reference_m"),
+        ({"stop_weight": {"min_weight": 5.0, "max_weight": 1.0}}, "stop_weight.min_weight"),
+        ({"stop_weight": {"scale": 1.0}}, "stop_weight.scale: unknown field"),
+        ({"stop_weight": "yes"}, "stop_weight: expected a mapping"),
     ],
 )
 def test_bad_config_is_one_line_naming_file_and_field(tmp_path, capsys, changes, field):

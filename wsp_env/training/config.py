@@ -77,6 +77,7 @@ class TrainConfig:
     checkpoint_every_timesteps: int = 1_000_000
     source: str = ""  # the file it came from (for messages)
     pretrain: Any = None  # imitation.PretrainConfig: a warm start before learning (fresh runs)
+    stop_weight: Any = None  # stop_weight.StopWeightConfig: the learner's reward weighted per stop
 
     def as_yaml_dict(self) -> dict[str, Any]:
         """The config as a file would hold it (what ``config.yaml`` in a run folder keeps)."""
@@ -92,6 +93,8 @@ class TrainConfig:
         out["checkpoint_every_timesteps"] = self.checkpoint_every_timesteps
         if self.pretrain is not None:
             out["pretrain"] = dataclasses.asdict(self.pretrain)
+        if self.stop_weight is not None:
+            out["stop_weight"] = dataclasses.asdict(self.stop_weight)
         return out
 
 
@@ -270,6 +273,16 @@ def parse_train_config(data: Any, source: str = "") -> TrainConfig:
                 raise ConfigError("pretrain: the teacher acts every control period; drop "
                                   "env_kwargs.action_repeat or the warm start")  # fmt: skip
     data.pop("pretrain", None)
+    stop_weight_cfg = None
+    if data.get("stop_weight") is not None:
+        from wsp_env.training.stop_weight import StopWeightConfig
+
+        raw = data.pop("stop_weight")
+        stop_weight_cfg = from_dict(StopWeightConfig, {} if raw is True else raw, "stop_weight")
+        if stop_weight_cfg.min_weight > stop_weight_cfg.max_weight:
+            raise ConfigError(f"stop_weight.min_weight: {stop_weight_cfg.min_weight} is above "
+                              f"max_weight {stop_weight_cfg.max_weight}")  # fmt: skip
+    data.pop("stop_weight", None)
     every = _int(data.pop("checkpoint_every_timesteps", 1_000_000), "checkpoint_every_timesteps")
     try:
         cls = _algo_class(algo)
@@ -286,7 +299,7 @@ def parse_train_config(data: Any, source: str = "") -> TrainConfig:
         hyper[k] = v
     cfg = TrainConfig(algo, n_timesteps, policy, n_envs, frame_stack, seed, normalize,
                       policy_kwargs, hyper, env_kwargs, eval_cfg, every, source,
-                      pretrain_cfg)  # fmt: skip
+                      pretrain_cfg, stop_weight_cfg)  # fmt: skip
     check_env_kwargs(cfg.env_kwargs)
     reward = cfg.env_kwargs.get("reward") or {}
     if isinstance(reward, dict) and float(reward.get("shaping_decel_mps2", 0.0) or 0.0) > 0.0:

@@ -13,7 +13,9 @@ written ``lin_3e-4``: linear from 3e-4 to 0), plus
   refused: it is for final comparisons only), ``every_timesteps`` and ``first_timesteps`` (the
   first validation and checkpoint, early by default) — and the fixed-seed learning curve
   (``curve_every_timesteps``, ``curve_runs``: ``LearningCurve``);
-* ``checkpoint_every_timesteps``.
+* ``checkpoint_every_timesteps``;
+* ``pretrain`` (``imitation.PretrainConfig``), the imitation warm start, and ``stop_weight``
+  (``stop_weight.StopWeightConfig``), the learner's reward weighted per stop.
 
 **Threads** (``wsp_env.threads``, role ``train``): the kernel serial below 8 cores, torch with
 1 thread while collecting and the measured best count while updating (``thread_switch``).
@@ -80,7 +82,12 @@ KEEP_CHECKPOINTS = 3  # the newest ones; the best model is kept apart (best_mode
 def _make_venv(cfg: TrainConfig) -> Any:
     from wsp_env.agents.sb3_vec import SB3VecEnv
 
-    return SB3VecEnv(num_envs=cfg.n_envs, **cfg.env_kwargs)
+    venv = SB3VecEnv(num_envs=cfg.n_envs, **cfg.env_kwargs)
+    if cfg.stop_weight is None:
+        return venv
+    from wsp_env.training.stop_weight import StopWeightedReward
+
+    return StopWeightedReward(venv, cfg.stop_weight)
 
 
 def make_training_env(cfg: TrainConfig) -> Any:
@@ -596,7 +603,7 @@ def _train(
             state = pickle.load(fh)
         _braking_core(venv).load_state_dict(state["core"])
         if state.get("adapter") is not None:  # checkpoints from 2026-11-26 on
-            venv.load_state_dict(state["adapter"])
+            _adapter(venv).load_state_dict(state["adapter"])
         env: Any = venv
         if cfg.normalize is not None:
             env = VecNormalize.load(str(ckpt / "model.vecnormalize.pkl"), venv)
