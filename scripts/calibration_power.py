@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import argparse
 import collections
+import dataclasses
 import json
 import math
 import multiprocessing
@@ -123,6 +124,7 @@ TARGETS = {"false_positive_max": 0.02, "detection_min": 0.90, "pairs_min": 0.80}
 # unmeasured brake force (the choice against pads is declared ambiguous, not forced): 90 % in
 # the named set (chosen or an alternative inside the tie margin)
 CATEGORY_TARGETS = {"adhesion_position": ("detection_rate", 0.60),
+                    "rail_gets_better": ("censored_rate", 0.90),
                     "load_transfer": ("with_geometry_rate", 0.80),
                     "unmeasured_brake_force": ("found_or_named_rate", 0.90)}  # fmt: skip
 
@@ -130,6 +132,19 @@ CATEGORY_TARGETS = {"adhesion_position": ("detection_rate", 0.60),
 def target_of(cat: str) -> tuple[str, float]:
     """(the row's rate judged, the rate needed) at the category's target magnitude."""
     return CATEGORY_TARGETS.get(cat, ("detection_rate", TARGETS["detection_min"]))
+
+
+# clean traces whose demand falls part-way (a driver easing the brake; the generator's
+# ``demand_drop_s`` / ``demand_drop_factor``): seeds seed * 1e6 + this + k, apart from every
+# category's and pair's
+DEMAND_DROP_SEED_OFFSET = 900_000
+
+
+def demand_drop_draw(seed: int) -> dict[str, float]:
+    """When (a fraction of the stop's rough duration, ``V0 / (g mu)``) and to what share of
+    itself the demand falls, from a stream of the seed's own."""
+    r = np.random.default_rng([seed, 31])
+    return {"fraction": float(r.uniform(0.2, 0.6)), "factor": float(r.uniform(0.3, 0.6))}
 
 
 def sliding_rail(seed: int) -> str:
@@ -197,6 +212,11 @@ def _run_one(job: dict[str, Any]) -> dict[str, Any]:
 
     rng = np.random.default_rng(job["seed"])
     scenario = ind.random_scenario(rng, **job.get("overrides", {}))
+    if job.get("demand_drop"):  # the stop's rough duration at its contaminated level
+        drop = job["demand_drop"]
+        duration_s = scenario.speed_kmh / 3.6 / (9.81 * scenario.mu_contaminated)
+        scenario = dataclasses.replace(scenario, demand_drop_s=drop["fraction"] * duration_s,
+                                       demand_drop_factor=drop["factor"])  # fmt: skip
     effects = [scaled_effect(ind, c, m, rng, scenario) for c, m in job["effects"]]
     t0 = time.perf_counter()
     columns, meta = ind.generate(scenario, effects, seed=job["seed"])
@@ -312,6 +332,11 @@ def _jobs(args: argparse.Namespace) -> list[dict[str, Any]]:
     seed = args.seed * 1_000_000
     for k in range(args.clean):
         jobs.append({"kind": "clean", "effects": [], "seed": seed + k})
+    for k in range(args.demand_drop):  # clean, but the demand falls part-way: the slides stop
+        s = seed + DEMAND_DROP_SEED_OFFSET + k
+        jobs.append({"kind": "clean_demand_drop", "effects": [], "seed": s,
+                     "overrides": {"contaminant": sliding_rail(s)},
+                     "demand_drop": demand_drop_draw(s)})  # fmt: skip
     for cat in cats:
         ci = seed_index(cat)  # a subset draws the full study's seeds
         for mi, mag in enumerate(GRID[cat][0]):
@@ -354,6 +379,14 @@ def summarise(results: list[dict[str, Any]]) -> dict[str, Any]:
         "calibrate_s_max": float(np.max([r["calibrate_s"] for r in ok])) if ok else 0.0,
         "generate_s_median": float(np.median([r["gen_s"] for r in ok])) if ok else 0.0,
     }
+    dropped = [r for r in ok if r["kind"] == "clean_demand_drop"]
+    out["clean_demand_drop"] = {
+        "n": len(dropped),
+        "false_positive_rate": float(np.mean([bool(r["added"]) for r in dropped]))
+        if dropped
+        else math.nan,
+        "added": sorted({c for r in dropped for c in r["added"]}),
+    }
     singles = [r for r in ok if r["kind"] == "single"]
     for cat in dict.fromkeys(r["category"] for r in singles):
         rows = []
@@ -390,6 +423,8 @@ def summarise(results: list[dict[str, Any]]) -> dict[str, Any]:
                 "extra": sorted({c for r in rs for c in r["extra"]}),
                 **_on_sliding_rails(rs, lambda r: r["effects_found"][0]["found"]),
             })  # fmt: skip
+            if cat == "rail_gets_better":
+                rows[-1].update(_censored_rate(rs))
             if cat in ("load_transfer", "adhesion_position"):
                 rows[-1].update(_adhesion_readings(cat, rs))
                 sliding = [r for r in clean if r.get("contaminant") in SLIDING_RAILS[0]]
@@ -436,6 +471,23 @@ def _on_sliding_rails(
         return {"sliding_n": 0.0, "sliding_rate": math.nan}
     return {"sliding_n": float(len(sub)),
             "sliding_rate": float(np.mean([bool(hit(r)) for r in sub]))}  # fmt: skip
+
+
+def _censored_rate(rs: list[dict[str, Any]]) -> dict[str, float]:
+    """A rail that gets better, on the traces where only censored evidence can show it (issue
+    25 item 4): some axle past the friction curve's peak for ``OBSERVABLE_S`` or more before the
+    change and for less after it (no slide to fit there; the generator's truth,
+    ``step_evidence``); the rate found there."""
+    sub = [r for r in rs if r.get("step_evidence")
+           and r["step_evidence"]["past_peak_s_before"] >= OBSERVABLE_S
+           and r["step_evidence"]["past_peak_s_after"] < OBSERVABLE_S]  # fmt: skip
+    return {"censored_n": float(len(sub)),
+            "censored_rate": float(np.mean([r["effects_found"][0]["found"] for r in sub]))
+            if sub else math.nan}  # fmt: skip
+
+
+def _pct(rate: float) -> str:
+    return "—" if not math.isfinite(rate) else f"{100 * rate:.0f} %"
 
 
 def _rate(row: dict[str, Any]) -> str:
@@ -525,6 +577,10 @@ def print_table(summary: dict[str, Any]) -> None:
     c = summary["clean"]
     print(f"clean traces: {c['n']}, false positives {100 * c['false_positive_rate']:.1f} % "
           f"(target <= {100 * TARGETS['false_positive_max']:g} %) {c['added']}")  # fmt: skip
+    d = summary.get("clean_demand_drop", {})
+    if d.get("n"):
+        print(f"clean traces whose demand falls part-way: {d['n']}, false positives "
+              f"{100 * d['false_positive_rate']:.1f} % {d['added']}")  # fmt: skip
     pitch = c.get("bogie_pitch_fit_minus_true", {})
     if pitch.get("n"):
         print(f"clean traces' bogie pitch, fitted less the generator's (kN per m/s^2, "
@@ -570,6 +626,11 @@ def print_table(summary: dict[str, Any]) -> None:
                 print(f"{'':24s} {row['magnitude']:10.4g}: fitted at all on "
                       f"{100 * row['tried_rate']:.0f} %, |fitted - true| median "
                       f"{row['fitted_abs_error_median']:.3g}{at}")  # fmt: skip
+            if "censored_n" in row:
+                rate = row["censored_rate"]
+                print(f"{'':24s} {row['magnitude']:10.4g}: past the peak >= {OBSERVABLE_S:g} s "
+                      f"before the change, less after (truth) on {row['censored_n']:.0f} of "
+                      f"{row['n']}; found there {_pct(rate)}")  # fmt: skip
             if "past_peak_both_sides_rate" in row:
                 print(f"{'':24s} {'':10s}  past the curve's peak >= {OBSERVABLE_S:g} s on both "
                       f"sides (truth) {100 * row['past_peak_both_sides_rate']:.0f} %; >= "
@@ -615,7 +676,8 @@ def _met_text(cat: str, info: dict[str, Any]) -> str:
     """'yes' / 'no', naming the rate judged where it is not the detection at 90 %."""
     key, needed = info.get("target_rate", target_of(cat))
     words = {"detection_rate": "detected", "with_geometry_rate": "detected with geometry",
-             "found_or_named_rate": "in the named set"}  # fmt: skip
+             "found_or_named_rate": "in the named set",
+             "censored_rate": "detected where no axle slides after the change"}  # fmt: skip
     verdict = "yes" if info["target_met"] else "no"
     if (key, needed) == ("detection_rate", TARGETS["detection_min"]):
         return verdict
@@ -671,12 +733,29 @@ def markdown_table(summary: dict[str, Any]) -> str:
                   "equally good alternative): " + "; ".join(
                       f"{cat} {_rate(r)} of {r['sliding_n']:.0f}"
                       for cat, r in lags) + "."]  # fmt: skip
+    better = [r for cat, info in summary["categories"].items() if cat == "rail_gets_better"
+              for r in info["rows"]]  # fmt: skip
+    if better:
+        lines += ["", "A rail that gets better, on the traces where only censored evidence can "
+                  "show it (some axle past the friction curve's peak for >= "
+                  f"{OBSERVABLE_S:g} s before the change and for less after, the generator's "
+                  "truth): "
+                  + "; ".join(f"x{r['magnitude']:g} {_pct(r['censored_rate'])} of "
+                              f"{r['censored_n']:.0f}" for r in better) + "."]  # fmt: skip
     c = summary["clean"]
+    d = summary.get("clean_demand_drop", {})
     lines += [
         "",
         f"False positives (any effect added to a clean trace; target <= "
         f"{100 * TARGETS['false_positive_max']:g} %): {100 * c['false_positive_rate']:.1f} % of "
-        f"{c['n']}.",
+        f"{c['n']}"
+        + (
+            f"; on {d['n']} clean traces whose demand falls part-way (the slides stop for that "
+            f"reason): {100 * d['false_positive_rate']:.1f} %"
+            if d.get("n")
+            else ""
+        )
+        + ".",
         "",
         f"Calibration per trace: median {summary['calibrate_s_median']:.2f} s, max "
         f"{summary['calibrate_s_max']:.2f} s; {summary['traces']} traces.",
@@ -689,6 +768,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--scenarios", type=int, default=20)
     ap.add_argument("--clean", type=int, default=50)
     ap.add_argument("--pairs", type=int, default=20)
+    ap.add_argument(
+        "--demand-drop",
+        type=int,
+        default=30,
+        help="clean traces whose demand falls part-way (false positives)",
+    )
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--categories", default="", help="comma-separated subset of the grid")

@@ -14,9 +14,9 @@ import numpy as np
 SCRIPTS = Path(__file__).resolve().parents[1] / "scripts"
 
 
-def _study(tmp_path: Path, category: str, clean: int) -> dict:
-    """The study on one scenario per magnitude of ``category`` and ``clean`` clean traces, as
-    its JSON gives it."""
+def _study(tmp_path: Path, category: str, clean: int, demand_drop: int = 0) -> dict:
+    """The study on one scenario per magnitude of ``category``, ``clean`` clean traces and
+    ``demand_drop`` clean traces whose demand falls part-way, as its JSON gives it."""
     sys.path.insert(0, str(SCRIPTS))
     try:
         import calibration_power as cp
@@ -24,7 +24,8 @@ def _study(tmp_path: Path, category: str, clean: int) -> dict:
         sys.path.remove(str(SCRIPTS))
     out = tmp_path / "power.json"
     args = ["--scenarios", "1", "--clean", str(clean), "--pairs", "0", "--jobs", "1",
-            "--categories", category, "--json", str(out)]  # fmt: skip
+            "--categories", category, "--demand-drop", str(demand_drop),
+            "--json", str(out)]  # fmt: skip
     assert cp.main(args) == 0
     return json.loads(out.read_text())
 
@@ -152,3 +153,23 @@ def test_the_best_threshold_search_keeps_the_clean_traces_false_positives():
     assert best["false_positive"] <= 0.02 and best["detection"] == 0.75
     # none may pass: over 1.6 or z 9 nothing of the steps is left
     assert fsn.best_detection(clean, steps, 0.0)["detection"] == 0.0
+
+
+def test_the_power_study_reports_the_censored_rail_and_a_falling_demand(tmp_path):
+    """The rail-gets-better row carries its rate on the traces where only censored evidence
+    can show it (judged there: ``target_rate``), and the clean traces whose demand falls
+    part-way their own false-positive rate."""
+    data = _study(tmp_path, "rail_gets_better", clean=0, demand_drop=1)
+    summary, results = data["summary"], data["results"]
+    assert summary["traces"] == 3 + 1 and not summary["errors"]
+    info = summary["categories"]["rail_gets_better"]
+    assert info["target_rate"] == ["censored_rate", 0.9]
+    for row in info["rows"]:
+        assert 0 <= row["censored_n"] <= row["n"]
+        rate = row["censored_rate"]
+        assert (row["censored_n"] == 0 and math.isnan(rate)) or 0.0 <= rate <= 1.0
+    dropped = summary["clean_demand_drop"]
+    assert dropped["n"] == 1 and 0.0 <= dropped["false_positive_rate"] <= 1.0
+    (job,) = [r for r in results if r["kind"] == "clean_demand_drop"]
+    drop = job["demand_drop"]
+    assert 0.2 <= drop["fraction"] <= 0.6 and 0.3 <= drop["factor"] <= 0.6

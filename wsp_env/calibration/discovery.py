@@ -133,6 +133,7 @@ from wsp_env.calibration.plausibility import (
     negligible,
     negligible_force,
 )
+from wsp_env.calibration.rail_better import rail_gets_better
 from wsp_env.calibration.residuals import (
     Channel,
     anchored,
@@ -259,8 +260,28 @@ def _discover(trace: Trace) -> Result:
             break
         best, alternatives = _choose(loop, qualified)
         _add(loop, best, alternatives)
+    _rail_better(loop)
     _finish(loop)
     return loop.result
+
+
+def _rail_better(loop: _Loop) -> None:
+    """A rail that got better part-way and stopped the slides, found from the censored evidence
+    alone (``rail_better``) where no friction step was fitted: an ``adhesion_position`` step
+    with the position the slides stopped at and a lower bound on the factor; the channel's error
+    is unchanged (nothing refitted)."""
+    result = loop.result
+    if not loop.health[ADHESION]["usable"] or len(result.added) >= MAX_EFFECTS:
+        return
+    if any(st.category == "adhesion_position" for st in result.added):
+        return
+    found = rail_gets_better(loop.trace, loop.adhesion.points, loop.adhesion.bounds)
+    if found is None:
+        return
+    rmse = loop.adhesion.rmse
+    step = Step("adhesion_position", "adhesion_position", ADHESION, found.as_params(), rmse,
+                rmse, float("nan"))  # fmt: skip
+    result.added.append(step)
 
 
 # ---- start: the nominal model's channels, their noise floors, the wheels' lag ----------------

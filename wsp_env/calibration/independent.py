@@ -69,7 +69,10 @@ contaminant and no recovery: their level is flat along the rail. ``roughness`` i
 variation (three sinusoids, wavelengths 15-250 m, relative RMS 0-6 %) of the contaminated level.
 
 *Brake.* Demand pressure ramps linearly from 0 to ``p_max`` over ``demand_ramp_s`` (0.5-1.5 s)
-from the brake application (emergency brake). Each axle's cylinder pressure follows a valve
+from the brake application (emergency brake); optionally (``demand_drop_s`` > 0, never drawn:
+a scenario override, for the clean traces whose wheels stop sliding because the demand falls)
+the demand falls to ``demand_drop_factor`` of itself ``demand_drop_s`` after the application
+(a driver easing the brake). Each axle's cylinder pressure follows a valve
 state: apply -> first order towards the demand with ``tau_fill_s`` (0.4-1.0 s); vent ->
 first order towards 0 with ``tau_vent_s`` (0.2-0.5 s, a different value); hold -> frozen.
 (Pressure above the demand while applying also falls with ``tau_vent_s``.) Torque
@@ -292,6 +295,8 @@ class Scenario:
     p_threshold_bar: float = 0.174
     torque_gain_Nm_per_bar: float = 2600.0
     demand_ramp_s: float = 1.0
+    demand_drop_s: float = 0.0  # > 0: the demand falls to demand_drop_factor this long after
+    demand_drop_factor: float = 1.0  # the application (a scenario override only, never drawn)
     tau_fill_s: float = 0.6
     tau_vent_s: float = 0.4
     valve_delay_cycles: int = 2
@@ -482,6 +487,10 @@ def random_scenario(rng: np.random.Generator, **overrides: Any) -> Scenario:
     # give the bogie pivot height (50 % of all)
     own = np.random.default_rng([int(d["seed"]), 25])
     d["pivot_in_metadata"] = bool(pick("pivot_in_metadata", bool(own.random() < 2.0 / 3.0)))
+    d["demand_drop_s"] = float(pick("demand_drop_s", 0.0))  # overrides only: the stream stays
+    d["demand_drop_factor"] = float(pick("demand_drop_factor", 1.0))
+    if d["demand_drop_s"] < 0.0 or not 0.0 < d["demand_drop_factor"] <= 1.0:
+        raise ValueError("demand_drop_s must be >= 0 and demand_drop_factor in (0, 1]")
     sc = Scenario(**d)
     for lst in ("car_axle_load_t", "static_front_share"):
         if len(getattr(sc, lst)) != sc.n_cars:
@@ -796,6 +805,8 @@ def _simulate(
         aref += ((vref - v_new) / (BCU_DT * 3.6) - aref) * (BCU_DT / 0.3)
         vref = v_new
         pd = sc.p_max_bar * min(1.0, (t - sc.lead_in_s) / sc.demand_ramp_s) if braking else 0.0
+        if sc.demand_drop_s > 0.0 and t - sc.lead_in_s >= sc.demand_drop_s:
+            pd *= sc.demand_drop_factor
         pd = max(pd, 0.0)
         if braking and vref > sc.wsp_off_kmh:
             dv = vref - xf

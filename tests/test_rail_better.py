@@ -1,0 +1,124 @@
+"""A rail that gets better part-way, found from censored evidence alone (``calibration.
+rail_better``; issue 25 item 4), on traces of the independent generator: development seeds of
+``scripts/calibration_power.py``'s layout at ``--seed 5`` (the study judges on ``--seed 0``)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.integrate import cumulative_trapezoid
+
+from wsp_env.calibration import independent as ind
+from wsp_env.calibration.adhesion_estimate import censored_points, pooled_points
+from wsp_env.calibration.discovery import discover
+from wsp_env.calibration.rail_better import (
+    PRESSURE_MARGIN_BAR,
+    STOP_SPEED_FRACTION,
+    rail_gets_better,
+    slide_onset_pressure_bar,
+    sliding_mask,
+)
+from wsp_env.calibration.residuals import MIN_SPEED_KMH
+from wsp_env.calibration.traces import read_trace
+
+
+def _trace(tmp_path, seed, effects=(), **overrides):
+    rng = np.random.default_rng(seed)
+    scenario = ind.random_scenario(rng, **overrides)
+    effs = [ind.random_effect(c, m, rng, scenario) for c, m in effects]
+    columns, meta = ind.generate(scenario, effs, seed=seed)
+    csv_path, _ = ind.write_trace(tmp_path / f"t{seed}", columns, meta)
+    return read_trace(csv_path), scenario, effs
+
+
+@pytest.mark.parametrize(
+    "seed,contaminant,factor",
+    [
+        (5111026, "soap", 2.0),
+        (5111001, "soap", 2.0),
+        (5111012, "soap", 2.0),
+        (5112003, "soap", 3.0),
+    ],  # 4, 16, 12 and 16 axles
+)
+def test_a_rail_that_gets_better_is_found_where_the_slides_stop(tmp_path, seed, contaminant,
+                                                                factor):  # fmt: skip
+    """The rail's friction x2 / x3 beyond a point: the slides stop there while the brake presses
+    harder than when they began. The loop adds a friction step from that alone (censored, no
+    refit), placed where the slides stopped: at most the change's place on the rail (the
+    rearmost sliding axle meets the better rail last) and not far before it."""
+    trace, scenario, (effect,) = _trace(
+        tmp_path, seed, [("adhesion_position", factor)], contaminant=contaminant
+    )
+    steps = [s for s in discover(trace).added if s.category == "adhesion_position"]
+    assert len(steps) == 1, [s.category for s in discover(trace).added]
+    p = steps[0].parameters
+    assert p["censored"] == 1.0 and p["factor_beyond_step"] >= 1.0
+    assert p["stop_speed_fraction"] >= STOP_SPEED_FRACTION
+    assert p["rolling_pressure_after_bar"] > p["slide_onset_pressure_bar"] + PRESSURE_MARGIN_BAR
+    run_m = cumulative_trapezoid(trace.v_train_kmh / 3.6, trace.time_s, initial=0.0)
+    change_m = (
+        float(np.interp(scenario.lead_in_s, trace.time_s, run_m)) + effect.params["position_m"]
+    )
+    # within 5 m past (the logged speed's and the axle offsets' resolution) and 40 % before
+    assert change_m - 0.4 * effect.params["position_m"] <= p["step_position_m"] <= change_m + 5.0
+
+
+@pytest.mark.parametrize(
+    "seed,contaminant,drop_s,factor",
+    [
+        # the slides stop at 45 % of the braking speed under the eased brake, which then holds
+        # exactly the pressure they began at (1.76 bar): no more force than made them slide
+        (5940006, "leaves", 5.372, 0.458),
+        (5940009, "oil", 11.89, 0.318),
+        (5940023, "leaves", 3.589, 0.530),
+    ],
+)
+def test_a_demand_that_falls_is_no_better_rail(tmp_path, seed, contaminant, drop_s, factor):
+    """Clean rails whose demand falls part-way (a driver easing the brake): the slides stop at
+    speed, but the wheels roll on at a lower pressure than the slides began at."""
+    trace, _, _ = _trace(tmp_path, seed, contaminant=contaminant, demand_drop_s=drop_s,
+                         demand_drop_factor=factor)  # fmt: skip
+    assert "adhesion_position" not in [s.category for s in discover(trace).added]
+    found = rail_gets_better(
+        trace, pooled_points(trace, MIN_SPEED_KMH), censored_points(trace, MIN_SPEED_KMH)
+    )
+    assert found is None
+
+
+def test_a_clean_rail_whose_slides_end_late_is_no_better_rail(tmp_path):
+    """Development clean seed 5910021 (soap): its slides stopped at 28 % of the braking speed,
+    the latest of 100 clean development traces; nothing is added."""
+    trace, _, _ = _trace(tmp_path, 5910021, contaminant="soap")
+    sliding = sliding_mask(trace)
+    last = np.flatnonzero(sliding.any(axis=1))[-1]
+    assert trace.v_train_kmh[last] / trace.v_train_kmh.max() < STOP_SPEED_FRACTION
+    assert discover(trace).added == []
+
+
+def test_the_onset_pressure_is_the_highest_before_each_slide(tmp_path):
+    """``slide_onset_pressure_bar``: per slide episode the highest pressure on its axle in the
+    second before it began, the median over episodes; a trace without a slide has none."""
+    trace, _, _ = _trace(tmp_path, 5910021, contaminant="soap")
+    sliding = sliding_mask(trace)
+    onset = slide_onset_pressure_bar(trace, sliding)
+    assert 0.0 < onset <= float(np.nanmax(trace.p_cyl_bar))
+    assert slide_onset_pressure_bar(trace, np.zeros_like(sliding)) == float("inf")
+
+
+def test_the_generators_demand_falls_where_asked(tmp_path):
+    """``demand_drop_s`` / ``demand_drop_factor`` (scenario overrides, never drawn): the logged
+    demand is the full one before and that share of it after; a bad value is refused."""
+    rng = np.random.default_rng(5940006)
+    scenario = ind.random_scenario(rng, contaminant="leaves", include_p_demand=True,
+                                   n_empty_cells=0, demand_drop_s=5.0,
+                                   demand_drop_factor=0.5)  # fmt: skip
+    columns, _ = ind.generate(scenario, [], seed=5940006)
+    t, demand = np.asarray(columns["time_s"]), np.asarray(columns["p_demand_bar"])
+    since = t - scenario.lead_in_s
+    full = demand[(since > scenario.demand_ramp_s + 0.2) & (since < 4.8)]
+    eased = demand[(since > 5.2) & (np.asarray(columns["v_train_kmh"]) > 5.0)]
+    assert full.size and eased.size
+    np.testing.assert_allclose(full, scenario.p_max_bar, atol=0.02)
+    np.testing.assert_allclose(eased, 0.5 * scenario.p_max_bar, atol=0.02)
+    with pytest.raises(ValueError, match="demand_drop"):
+        ind.random_scenario(np.random.default_rng(1), demand_drop_factor=1.5)

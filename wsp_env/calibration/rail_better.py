@@ -1,0 +1,171 @@
+"""A rail that gets better part-way, found from censored evidence alone (issue 25, item 4).
+
+Where the rail gets better and the wheels stop sliding, the adhesion channel's critical points
+end at the change: beyond it there is nothing to fit a friction step to, only rolling wheels.
+What they prove is an inequality (``adhesion_estimate.censored_points``): the rail carried at
+least the force they transmitted. On its own a rolling wheel proves little — on a uniform rail a
+braked wheel beyond the last slide already uses 1.3x (median) the adhesion the slides showed,
+because a rolling wheel sits at the friction curve's peak, a sliding one on its falling side, and
+the adhesion rises as the speed falls (docs/calibration.md, "The misses"). What a uniform rail
+does not do is stop the slides early while the brake keeps pressing as hard:
+
+* **the slides stop at speed**: the train's speed at the last slide (any axle slower than both
+  the train and the fastest axle by ``adhesion_model.SLIDE_MIN_KMH``, above
+  ``residuals.MIN_SPEED_KMH``) is at least ``STOP_SPEED_FRACTION`` of the braking speed (the
+  highest train speed logged). On a uniform contaminated rail the slides go on until the speed
+  has fallen far (the adhesion's rise with falling speed, the rail's cleaning, end them late);
+* **the brake pressed harder than when they slid**: after the last slide the wheels rolled at a
+  cylinder pressure (median over axles and samples, above ``MIN_SPEED_KMH``) above the pressure
+  at which the slides began (median over the slide episodes of the highest pressure on their
+  axle in the ``ONSET_WINDOW_S`` up to the episode's start) by more than
+  ``PRESSURE_MARGIN_BAR`` (the coarsest pressure quantum in logged traces): the same wheels
+  carried more force than had made them slide — the inequality. A demand that falls (a driver
+  easing the brake) stops the slides too, but leaves the wheels rolling at a lower pressure;
+* **evidence on both sides**: at least ``MIN_SLIDES`` slide(s) at the adhesion limit
+  (``adhesion_model.slides_at_limit``) before, and ``MIN_AFTER_S`` of braking after.
+
+The thresholds were set on development traces of the independent generator (seed 5: 100 clean
+traces, 60 of them on sliding rails; 30 clean traces on sliding rails whose demand falls
+part-way; 30 better-rail traces at x2 and x3). There the clean traces' speed fraction at the
+last slide reached 0.28 at most; of the demand-drop traces whose slides stopped above that,
+none rolled on above the onset pressure by the margin. They are judged on the power study's
+own seeds and on fresh clean sets (``scripts/calibration_power.py``).
+
+The finding is reported as ``adhesion_position`` (a friction factor on the rail beyond a
+position), with the rail position where the slides stopped (``step_position_m``,
+``stop_position_m``) and a censored reading of
+the factor (``factor_beyond_step``, flagged ``censored: 1``): the rolling wheels' used adhesion
+beyond that position over the adhesion their axle showed at its slides (median over the
+censored bounds there; 1 where no bound lies beyond). It is no fit: the brake's demand caps it
+(a rail far better than the demand reads no higher than the demand) and the adhesion's rise as
+the speed falls inflates it; on the development traces it read 1.1-3.2 for a true x2. The
+channel's error does not change (nothing is refitted): the step's ``before`` and ``after`` are
+equal and its ``delta_bic`` is NaN.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.integrate import cumulative_trapezoid
+
+from wsp_env.calibration.adhesion_estimate import CensoredPoints, CriticalPoints
+from wsp_env.calibration.adhesion_model import SLIDE_MIN_KMH, axle_offsets_m, slides_at_limit
+from wsp_env.calibration.residuals import MIN_SPEED_KMH
+from wsp_env.calibration.traces import Trace
+
+STOP_SPEED_FRACTION = 0.35
+ONSET_WINDOW_S = 1.0
+PRESSURE_MARGIN_BAR = 0.05
+MIN_SLIDES = 1
+MIN_AFTER_S = 2.0
+
+
+@dataclass(frozen=True)
+class RailBetter:
+    """What the censored evidence shows (``rail_gets_better``)."""
+
+    step_position_m: float  # the rail position where the slides stopped
+    factor_reading: float  # used adhesion beyond it over the slides' (censored, no fit)
+    stop_speed_fraction: float  # train speed at the last slide / braking speed
+    onset_bar: float  # the pressure at which the slides began (median over episodes)
+    after_bar: float  # the pressure the wheels rolled at after the last slide (median)
+    slides: int  # slides at the adhesion limit before
+    after_s: float  # braking time after the last slide
+
+    def as_params(self) -> dict[str, float]:
+        return {
+            "step_position_m": self.step_position_m,
+            "factor_beyond_step": self.factor_reading,
+            "censored": 1.0,
+            "stop_speed_fraction": self.stop_speed_fraction,
+            "slide_onset_pressure_bar": self.onset_bar,
+            "rolling_pressure_after_bar": self.after_bar,
+        }
+
+
+def sliding_mask(trace: Trace) -> np.ndarray:
+    """(samples, axles): an axle slower than both the train and the fastest axle by
+    ``SLIDE_MIN_KMH``, where the train runs above ``MIN_SPEED_KMH``."""
+    v_axle = trace.v_axle_kmh
+    behind_train = trace.v_train_kmh[:, None] - v_axle
+    if trace.n_axles > 1:
+        depth = np.minimum(behind_train, v_axle.max(axis=1)[:, None] - v_axle)
+    else:
+        depth = behind_train
+    return (depth >= SLIDE_MIN_KMH) & (trace.v_train_kmh >= MIN_SPEED_KMH)[:, None]
+
+
+def rail_gets_better(
+    trace: Trace, points: CriticalPoints, bounds: CensoredPoints
+) -> RailBetter | None:
+    """The module docstring's test on one trace: a ``RailBetter`` where it fires, else None."""
+    if not len(points):
+        return None
+    at_limit = slides_at_limit(trace, points)
+    n_slides = int(at_limit.sum())
+    if n_slides < MIN_SLIDES:
+        return None
+    sliding = sliding_mask(trace)
+    rows = np.flatnonzero(sliding.any(axis=1))
+    if not rows.size:
+        return None
+    last = int(rows[-1])
+    v_brake = float(np.max(trace.v_train_kmh))
+    fraction = float(trace.v_train_kmh[last] / v_brake) if v_brake > 0 else 0.0
+    if fraction < STOP_SPEED_FRACTION:
+        return None
+    after = (np.arange(trace.time_s.size) > last) & (trace.v_train_kmh >= MIN_SPEED_KMH)
+    if not after.any():
+        return None
+    after_s = float(trace.time_s[np.flatnonzero(after)[-1]] - trace.time_s[last])
+    if after_s < MIN_AFTER_S:
+        return None
+    p_onset = slide_onset_pressure_bar(trace, sliding)
+    p_after = float(np.nanmedian(trace.p_cyl_bar[after]))
+    if not p_after > p_onset + PRESSURE_MARGIN_BAR:
+        return None
+    offsets = axle_offsets_m(trace)
+    # the distance run, as the critical points and bounds place themselves
+    run_m = cumulative_trapezoid(trace.v_train_kmh / 3.6, trace.time_s, initial=0.0)
+    position = stop_position_m(sliding, run_m, offsets)
+    mu = points.mu[at_limit]
+    axles = points.axle[at_limit]
+    level = {int(a): float(np.median(mu[axles == a])) for a in np.unique(axles)}
+    factor = 1.0
+    if len(bounds):
+        beyond = (bounds.position_m - offsets[bounds.axle]) > position
+        if beyond.any():
+            ref = np.array([level.get(int(a), float(np.median(mu))) for a in bounds.axle[beyond]])
+            used = bounds.force_N[beyond] / bounds.normal_N[beyond]
+            factor = max(1.0, float(np.median(used / ref)))
+    return RailBetter(position, factor, fraction, p_onset, p_after, n_slides, after_s)
+
+
+def stop_position_m(sliding: np.ndarray, run_m: np.ndarray, offsets: np.ndarray) -> float:
+    """The rail position beyond which no axle slid: each axle's last slide placed on the rail
+    (the distance run then, less its offset behind axle 1), the furthest of them. Where the
+    offsets are unknown (``axle_offsets_m`` gives them for one two-bogie vehicle, zeros for a
+    longer train) a rear axle's place would be read a train length too far, so the axle
+    nearest the front that slid is taken instead."""
+    slid = np.flatnonzero(sliding.any(axis=0))
+    last = np.array([np.flatnonzero(sliding[:, a])[-1] for a in slid])
+    rail = run_m[last] - offsets[slid]
+    if offsets.size > 1 and not np.any(offsets[1:]):
+        return float(rail[0])
+    return float(rail.max())
+
+
+def slide_onset_pressure_bar(trace: Trace, sliding: np.ndarray) -> float:
+    """The cylinder pressure at which the slides began: for each slide episode (a run of
+    ``sliding`` on one axle), the highest pressure on its axle in the ``ONSET_WINDOW_S`` up to
+    its first sample; their median."""
+    dt = float(np.median(np.diff(trace.time_s))) if trace.time_s.size > 1 else 1.0
+    window = max(1, round(ONSET_WINDOW_S / dt))
+    onsets = []
+    for a in range(trace.n_axles):
+        m = sliding[:, a]
+        starts = np.flatnonzero(m & ~np.concatenate([[False], m[:-1]]))
+        onsets += [float(np.nanmax(trace.p_cyl_bar[max(0, i - window) : i + 1, a])) for i in starts]
+    return float(np.median(onsets)) if onsets else float("inf")
