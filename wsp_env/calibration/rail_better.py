@@ -21,8 +21,9 @@ does not do is stop the slides early while the brake keeps pressing as hard:
   ``PRESSURE_MARGIN_BAR`` (the coarsest pressure quantum in logged traces): the same wheels
   carried more force than had made them slide — the inequality. A demand that falls (a driver
   easing the brake) stops the slides too, but leaves the wheels rolling at a lower pressure;
-* **evidence on both sides**: at least ``MIN_SLIDES`` slide(s) at the adhesion limit
-  (``adhesion_model.slides_at_limit``) before, and ``MIN_AFTER_S`` of braking after.
+* **evidence on both sides**: at least ``MIN_SLIDES`` slide episode(s) before (a run of the
+  sliding test above on one axle: that wheel met the rail's limit at its onset pressure), and
+  ``MIN_AFTER_S`` of braking after.
 
 The thresholds were set on development traces of the independent generator (seed 5: 100 clean
 traces, 60 of them on sliding rails; 30 clean traces on sliding rails whose demand falls
@@ -33,14 +34,15 @@ own seeds and on fresh clean sets (``scripts/calibration_power.py``).
 
 The finding is reported as ``adhesion_position`` (a friction factor on the rail beyond a
 position), with the rail position where the slides stopped (``step_position_m``,
-``stop_position_m``) and a censored reading of
-the factor (``factor_beyond_step``, flagged ``censored: 1``): the rolling wheels' used adhesion
-beyond that position over the adhesion their axle showed at its slides (median over the
-censored bounds there; 1 where no bound lies beyond). It is no fit: the brake's demand caps it
-(a rail far better than the demand reads no higher than the demand) and the adhesion's rise as
-the speed falls inflates it; on the development traces it read 1.1-3.2 for a true x2. The
-channel's error does not change (nothing is refitted): the step's ``before`` and ``after`` are
-equal and its ``delta_bic`` is NaN.
+``stop_position_m``) and a censored reading of the factor (``factor_beyond_step``, flagged
+``censored: 1``): the larger of two lower readings of how much more the rail carried there —
+the rolling pressure over the onset pressure (``pressure_ratio``: the brake force's ratio is at
+least that, the pressure's threshold subtracted from both), and the rolling wheels' used
+adhesion beyond that position over the adhesion their axle showed at its slides (median over
+the censored bounds there, where any). It is no fit: the brake's demand caps it (a rail far
+better than the demand reads no higher than the demand) and the adhesion's rise as the speed
+falls inflates it. The channel's error does not change (nothing is refitted): the step's
+``before`` and ``after`` are equal and its ``delta_bic`` is NaN.
 """
 
 from __future__ import annotations
@@ -71,13 +73,14 @@ class RailBetter:
     stop_speed_fraction: float  # train speed at the last slide / braking speed
     onset_bar: float  # the pressure at which the slides began (median over episodes)
     after_bar: float  # the pressure the wheels rolled at after the last slide (median)
-    slides: int  # slides at the adhesion limit before
+    slides: int  # slide episodes before
     after_s: float  # braking time after the last slide
 
     def as_params(self) -> dict[str, float]:
         return {
             "step_position_m": self.step_position_m,
             "factor_beyond_step": self.factor_reading,
+            "pressure_ratio": self.after_bar / self.onset_bar,
             "censored": 1.0,
             "stop_speed_fraction": self.stop_speed_fraction,
             "slide_onset_pressure_bar": self.onset_bar,
@@ -101,16 +104,11 @@ def rail_gets_better(
     trace: Trace, points: CriticalPoints, bounds: CensoredPoints
 ) -> RailBetter | None:
     """The module docstring's test on one trace: a ``RailBetter`` where it fires, else None."""
-    if not len(points):
-        return None
-    at_limit = slides_at_limit(trace, points)
-    n_slides = int(at_limit.sum())
+    sliding = sliding_mask(trace)
+    n_slides = slide_episodes(sliding)
     if n_slides < MIN_SLIDES:
         return None
-    sliding = sliding_mask(trace)
     rows = np.flatnonzero(sliding.any(axis=1))
-    if not rows.size:
-        return None
     last = int(rows[-1])
     v_brake = float(np.max(trace.v_train_kmh))
     fraction = float(trace.v_train_kmh[last] / v_brake) if v_brake > 0 else 0.0
@@ -130,16 +128,17 @@ def rail_gets_better(
     # the distance run, as the critical points and bounds place themselves
     run_m = cumulative_trapezoid(trace.v_train_kmh / 3.6, trace.time_s, initial=0.0)
     position = stop_position_m(sliding, run_m, offsets)
-    mu = points.mu[at_limit]
-    axles = points.axle[at_limit]
+    at_limit = slides_at_limit(trace, points) if len(points) else np.zeros(0, dtype=bool)
+    mu = points.mu[at_limit] if at_limit.any() else np.zeros(0)
+    axles = points.axle[at_limit] if at_limit.any() else np.zeros(0, dtype=int)
     level = {int(a): float(np.median(mu[axles == a])) for a in np.unique(axles)}
-    factor = 1.0
-    if len(bounds):
+    factor = p_after / p_onset  # > 1: the test above
+    if len(bounds) and mu.size:
         beyond = (bounds.position_m - offsets[bounds.axle]) > position
         if beyond.any():
             ref = np.array([level.get(int(a), float(np.median(mu))) for a in bounds.axle[beyond]])
             used = bounds.force_N[beyond] / bounds.normal_N[beyond]
-            factor = max(1.0, float(np.median(used / ref)))
+            factor = max(factor, float(np.median(used / ref)))
     return RailBetter(position, factor, fraction, p_onset, p_after, n_slides, after_s)
 
 
@@ -155,6 +154,12 @@ def stop_position_m(sliding: np.ndarray, run_m: np.ndarray, offsets: np.ndarray)
     if offsets.size > 1 and not np.any(offsets[1:]):
         return float(rail[0])
     return float(rail.max())
+
+
+def slide_episodes(sliding: np.ndarray) -> int:
+    """The number of slide episodes: runs of ``sliding`` on one axle."""
+    starts = sliding & ~np.vstack([np.zeros((1, sliding.shape[1]), dtype=bool), sliding[:-1]])
+    return int(starts.sum())
 
 
 def slide_onset_pressure_bar(trace: Trace, sliding: np.ndarray) -> float:
