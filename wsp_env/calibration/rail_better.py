@@ -69,7 +69,7 @@ class RailBetter:
     """What the censored evidence shows (``rail_gets_better``)."""
 
     step_position_m: float  # the rail position where the slides stopped
-    factor_reading: float  # used adhesion beyond it over the slides' (censored, no fit)
+    factor_reading: float  # the pressure or used-adhesion ratio, the larger (censored, no fit)
     stop_speed_fraction: float  # train speed at the last slide / braking speed
     onset_bar: float  # the pressure at which the slides began (median over episodes)
     after_bar: float  # the pressure the wheels rolled at after the last slide (median)
@@ -110,9 +110,9 @@ def rail_gets_better(
         return None
     rows = np.flatnonzero(sliding.any(axis=1))
     last = int(rows[-1])
-    v_brake = float(np.max(trace.v_train_kmh))
+    v_brake = float(np.nanmax(trace.v_train_kmh))
     fraction = float(trace.v_train_kmh[last] / v_brake) if v_brake > 0 else 0.0
-    if fraction < STOP_SPEED_FRACTION:
+    if not fraction >= STOP_SPEED_FRACTION:  # NaN: no finding
         return None
     after = (np.arange(trace.time_s.size) > last) & (trace.v_train_kmh >= MIN_SPEED_KMH)
     if not after.any():
