@@ -15,6 +15,7 @@ from wsp_env.calibration.rail_better import (
     PRESSURE_MARGIN_BAR,
     STOP_SPEED_FRACTION,
     rail_gets_better,
+    slide_episodes,
     slide_onset_pressure_bar,
     sliding_mask,
 )
@@ -99,10 +100,14 @@ def test_the_onset_pressure_is_the_highest_before_each_slide(tmp_path):
     """``slide_onset_pressure_bar``: per slide episode the highest pressure on its axle in the
     second before it began, the median over episodes; a trace without a slide has none."""
     trace, _, _ = _trace(tmp_path, 5910021, contaminant="soap")
-    sliding = sliding_mask(trace)
-    onset = slide_onset_pressure_bar(trace, sliding)
+    episodes = slide_episodes(trace, sliding_mask(trace))
+    onset = slide_onset_pressure_bar(trace, episodes)
     assert 0.0 < onset <= float(np.nanmax(trace.p_cyl_bar))
-    assert slide_onset_pressure_bar(trace, np.zeros_like(sliding)) == float("inf")
+    a, i, _ = episodes[0]
+    n = round(1.0 / float(np.median(np.diff(trace.time_s))))  # the samples in 1 s
+    window = trace.p_cyl_bar[max(0, i - n) : i + 1, a]
+    assert slide_onset_pressure_bar(trace, episodes[:1]) == pytest.approx(float(window.max()))
+    assert np.isnan(slide_onset_pressure_bar(trace, []))
 
 
 def test_the_generators_demand_falls_where_asked(tmp_path):

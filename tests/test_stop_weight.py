@@ -79,7 +79,7 @@ def test_wrapper_weights_each_stop_and_leaves_the_statistics_alone():
     np.testing.assert_array_equal(wrapped.weights, weights)
     assert len(set(weights.round(9))) == 3  # three different stops
     action = np.ones((3, 4), dtype=np.float32)
-    changed = 0
+    resets = np.zeros(3, dtype=int)
     for _ in range(300):
         plain.step_async(action)
         wrapped.step_async(action)
@@ -91,12 +91,12 @@ def test_wrapper_weights_each_stop_and_leaves_the_statistics_alone():
             assert i1[e]["episode"]["r"] == i0[e]["episode"]["r"]  # the plain return
             new = stop_weight(plain.env_method("describe", indices=[int(e)])[0], CFG)
             assert wrapped.weights[e] == new
-            changed += new != weights[e]
+            resets[e] += 1
             weights[e] = new
-    assert changed >= 3  # every environment went through at least one autoreset
+    assert (resets >= 2).all(), resets  # every environment went through autoresets
 
 
-def test_training_env_weighs_under_the_normalisation(tmp_path):
+def test_training_env_weighs_under_the_normalisation():
     """``make_training_env``: the weight sits on the adapter, under VecNormalize (so the
     normalisation sees the weighted reward the critic learns), and only when configured."""
     from stable_baselines3.common.vec_env import VecNormalize
@@ -135,3 +135,8 @@ def test_fit_script_reads_gain_against_distance(tmp_path, capsys):
     assert stop_weight_fit.main([str(path)]) == 0
     out = capsys.readouterr().out
     assert "4 scored stops; corr(log G, log d_est) 1.00" in out and "of G / d_est 1.0x" in out
+
+
+def test_a_stop_without_an_adhesion_level_is_refused():
+    with pytest.raises(ValueError, match="stop_weight: the stop has no adhesion level"):
+        stop_weight({**_scenario(), "mu_contaminated": None}, CFG)

@@ -489,8 +489,10 @@ def random_scenario(rng: np.random.Generator, **overrides: Any) -> Scenario:
     d["pivot_in_metadata"] = bool(pick("pivot_in_metadata", bool(own.random() < 2.0 / 3.0)))
     d["demand_drop_s"] = float(pick("demand_drop_s", 0.0))  # overrides only: the stream stays
     d["demand_drop_factor"] = float(pick("demand_drop_factor", 1.0))
-    if d["demand_drop_s"] < 0.0 or not 0.0 < d["demand_drop_factor"] <= 1.0:
-        raise ValueError("demand_drop_s must be >= 0 and demand_drop_factor in (0, 1]")
+    if not d["demand_drop_s"] >= 0.0:
+        raise ValueError(f"demand_drop_s must be >= 0 (s), got {d['demand_drop_s']}")
+    if not 0.0 < d["demand_drop_factor"] <= 1.0:
+        raise ValueError(f"demand_drop_factor must be in (0, 1], got {d['demand_drop_factor']}")
     sc = Scenario(**d)
     for lst in ("car_axle_load_t", "static_front_share"):
         if len(getattr(sc, lst)) != sc.n_cars:

@@ -22,8 +22,10 @@ does not do is stop the slides early while the brake keeps pressing as hard:
   carried more force than had made them slide — the inequality. A demand that falls (a driver
   easing the brake) stops the slides too, but leaves the wheels rolling at a lower pressure;
 * **evidence on both sides**: at least ``MIN_SLIDES`` slide episode(s) before (a run of the
-  sliding test above on one axle: that wheel met the rail's limit at its onset pressure), and
-  ``MIN_AFTER_S`` of braking after.
+  sliding test above on one axle that began with the axle braked, ``traces.braked``: that wheel
+  met the rail's limit at its onset pressure; a wheel that reads slow from the coasting on, a
+  radius or sensor error, is no slide), and ``MIN_AFTER_S`` of running after, above
+  ``MIN_SPEED_KMH``.
 
 The thresholds were set on development traces of the independent generator (seed 5: 100 clean
 traces, 60 of them on sliding rails; 30 clean traces on sliding rails whose demand falls
@@ -47,6 +49,7 @@ falls inflates it. The channel's error does not change (nothing is refitted): th
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -55,7 +58,7 @@ from scipy.integrate import cumulative_trapezoid
 from wsp_env.calibration.adhesion_estimate import CensoredPoints, CriticalPoints
 from wsp_env.calibration.adhesion_model import SLIDE_MIN_KMH, axle_offsets_m, slides_at_limit
 from wsp_env.calibration.residuals import MIN_SPEED_KMH
-from wsp_env.calibration.traces import Trace
+from wsp_env.calibration.traces import Trace, braked
 
 STOP_SPEED_FRACTION = 0.35
 ONSET_WINDOW_S = 1.0
@@ -80,7 +83,7 @@ class RailBetter:
         return {
             "step_position_m": self.step_position_m,
             "factor_beyond_step": self.factor_reading,
-            "pressure_ratio": self.after_bar / self.onset_bar,
+            "pressure_ratio": self.after_bar / self.onset_bar if self.onset_bar > 0 else math.inf,
             "censored": 1.0,
             "stop_speed_fraction": self.stop_speed_fraction,
             "slide_onset_pressure_bar": self.onset_bar,
@@ -94,25 +97,36 @@ def sliding_mask(trace: Trace) -> np.ndarray:
     v_axle = trace.v_axle_kmh
     behind_train = trace.v_train_kmh[:, None] - v_axle
     if trace.n_axles > 1:
-        depth = np.minimum(behind_train, v_axle.max(axis=1)[:, None] - v_axle)
+        depth = np.minimum(behind_train, np.nanmax(v_axle, axis=1)[:, None] - v_axle)
     else:
         depth = behind_train
     return (depth >= SLIDE_MIN_KMH) & (trace.v_train_kmh >= MIN_SPEED_KMH)[:, None]
+
+
+def slide_episodes(trace: Trace, sliding: np.ndarray) -> list[tuple[int, int, int]]:
+    """The slide episodes, ``(axle, first sample, last sample)``: runs of ``sliding`` on one
+    axle that begin with the axle braked (``traces.braked``)."""
+    on = braked(trace)
+    out = []
+    for a in range(sliding.shape[1]):
+        m = sliding[:, a]
+        starts = np.flatnonzero(m & ~np.concatenate([[False], m[:-1]]))
+        ends = np.flatnonzero(m & ~np.concatenate([m[1:], [False]]))
+        out += [(a, int(i), int(j)) for i, j in zip(starts, ends, strict=True) if on[i, a]]
+    return out
 
 
 def rail_gets_better(
     trace: Trace, points: CriticalPoints, bounds: CensoredPoints
 ) -> RailBetter | None:
     """The module docstring's test on one trace: a ``RailBetter`` where it fires, else None."""
-    sliding = sliding_mask(trace)
-    n_slides = slide_episodes(sliding)
-    if n_slides < MIN_SLIDES:
+    episodes = slide_episodes(trace, sliding_mask(trace))
+    if len(episodes) < MIN_SLIDES:
         return None
-    rows = np.flatnonzero(sliding.any(axis=1))
-    last = int(rows[-1])
+    last = max(end for _, _, end in episodes)
     v_brake = float(np.nanmax(trace.v_train_kmh))
     fraction = float(trace.v_train_kmh[last] / v_brake) if v_brake > 0 else 0.0
-    if not fraction >= STOP_SPEED_FRACTION:  # NaN: no finding
+    if not fraction >= STOP_SPEED_FRACTION:
         return None
     after = (np.arange(trace.time_s.size) > last) & (trace.v_train_kmh >= MIN_SPEED_KMH)
     if not after.any():
@@ -120,14 +134,14 @@ def rail_gets_better(
     after_s = float(trace.time_s[np.flatnonzero(after)[-1]] - trace.time_s[last])
     if after_s < MIN_AFTER_S:
         return None
-    p_onset = slide_onset_pressure_bar(trace, sliding)
+    p_onset = slide_onset_pressure_bar(trace, episodes)
     p_after = float(np.nanmedian(trace.p_cyl_bar[after]))
-    if not p_after > p_onset + PRESSURE_MARGIN_BAR:
+    if not (p_onset > 0.0 and p_after > p_onset + PRESSURE_MARGIN_BAR):
         return None
     offsets = axle_offsets_m(trace)
     # the distance run, as the critical points and bounds place themselves
     run_m = cumulative_trapezoid(trace.v_train_kmh / 3.6, trace.time_s, initial=0.0)
-    position = stop_position_m(sliding, run_m, offsets)
+    position, axle = stop_position_m(episodes, run_m, offsets)
     at_limit = slides_at_limit(trace, points) if len(points) else np.zeros(0, dtype=bool)
     mu = points.mu[at_limit] if at_limit.any() else np.zeros(0)
     axles = points.axle[at_limit] if at_limit.any() else np.zeros(0, dtype=int)
@@ -135,42 +149,44 @@ def rail_gets_better(
     factor = p_after / p_onset  # > 1: the test above
     if len(bounds) and mu.size:
         beyond = (bounds.position_m - offsets[bounds.axle]) > position
+        if axle is not None:  # offsets unknown: only the axle the position is read from
+            beyond &= bounds.axle == axle
         if beyond.any():
             ref = np.array([level.get(int(a), float(np.median(mu))) for a in bounds.axle[beyond]])
             used = bounds.force_N[beyond] / bounds.normal_N[beyond]
             factor = max(factor, float(np.median(used / ref)))
-    return RailBetter(position, factor, fraction, p_onset, p_after, n_slides, after_s)
+    return RailBetter(position, factor, fraction, p_onset, p_after, len(episodes), after_s)
 
 
-def stop_position_m(sliding: np.ndarray, run_m: np.ndarray, offsets: np.ndarray) -> float:
-    """The rail position beyond which no axle slid: each axle's last slide placed on the rail
-    (the distance run then, less its offset behind axle 1), the furthest of them. Where the
-    offsets are unknown (``axle_offsets_m`` gives them for one two-bogie vehicle, zeros for a
-    longer train) a rear axle's place would be read a train length too far, so the axle
-    nearest the front that slid is taken instead."""
-    slid = np.flatnonzero(sliding.any(axis=0))
-    last = np.array([np.flatnonzero(sliding[:, a])[-1] for a in slid])
-    rail = run_m[last] - offsets[slid]
+def stop_position_m(
+    episodes: list[tuple[int, int, int]], run_m: np.ndarray, offsets: np.ndarray
+) -> tuple[float, int | None]:
+    """The rail position beyond which no axle slid, and the one axle it was read from where that
+    matters: each axle's last slide placed on the rail (the distance run then, less its offset
+    behind axle 1), the furthest of them (axle None). Where the offsets are unknown
+    (``axle_offsets_m`` gives them for one two-bogie vehicle, zeros for a longer train) a rear
+    axle's place would be read a train length too far, so the axle nearest the front that slid
+    is taken instead."""
+    last: dict[int, int] = {}
+    for a, _, end in episodes:
+        last[a] = max(last.get(a, end), end)
+    axles = sorted(last)
+    rail = [float(run_m[last[a]] - offsets[a]) for a in axles]
     if offsets.size > 1 and not np.any(offsets[1:]):
-        return float(rail[0])
-    return float(rail.max())
+        return rail[0], axles[0]
+    return max(rail), None
 
 
-def slide_episodes(sliding: np.ndarray) -> int:
-    """The number of slide episodes: runs of ``sliding`` on one axle."""
-    starts = sliding & ~np.vstack([np.zeros((1, sliding.shape[1]), dtype=bool), sliding[:-1]])
-    return int(starts.sum())
-
-
-def slide_onset_pressure_bar(trace: Trace, sliding: np.ndarray) -> float:
-    """The cylinder pressure at which the slides began: for each slide episode (a run of
-    ``sliding`` on one axle), the highest pressure on its axle in the ``ONSET_WINDOW_S`` up to
-    its first sample; their median."""
+def slide_onset_pressure_bar(trace: Trace, episodes: list[tuple[int, int, int]]) -> float:
+    """The cylinder pressure at which the slides began: for each slide episode, the highest
+    pressure on its axle in the ``ONSET_WINDOW_S`` up to its first sample; their median (NaN
+    cells left out; NaN without an episode)."""
     dt = float(np.median(np.diff(trace.time_s))) if trace.time_s.size > 1 else 1.0
     window = max(1, round(ONSET_WINDOW_S / dt))
-    onsets = []
-    for a in range(trace.n_axles):
-        m = sliding[:, a]
-        starts = np.flatnonzero(m & ~np.concatenate([[False], m[:-1]]))
-        onsets += [float(np.nanmax(trace.p_cyl_bar[max(0, i - window) : i + 1, a])) for i in starts]
-    return float(np.median(onsets)) if onsets else float("inf")
+    onsets = [
+        np.nanmax(trace.p_cyl_bar[max(0, i - window) : i + 1, a])
+        if np.isfinite(trace.p_cyl_bar[max(0, i - window) : i + 1, a]).any()
+        else np.nan
+        for a, i, _ in episodes
+    ]
+    return float(np.nanmedian(onsets)) if np.isfinite(onsets).any() else float("nan")

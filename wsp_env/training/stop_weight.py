@@ -17,10 +17,11 @@ of the same stop), so each stop's rewards are multiplied by ``reference_m / d_es
 
 (``mu``: the rail's contaminated adhesion level, ``mu_contaminated``; ``theta``: the gradient,
 > 0 uphill; ``demand_decel_mps2``: the full demand's deceleration), clipped to
-``[min_weight, max_weight]``. On the benchmark's 300 development stops with the classical WSP,
-``log G`` and ``log d_est`` correlate at 0.70 and ``G / d_est`` spans 3.2x between its quartiles
-against 5.7x for ``G`` alone (``scripts/stop_weight_fit.py`` on ``wsp-env benchmark --stops
-development --policy none --policy classical --json F``): a rough but flatter scale. The weight
+``[min_weight, max_weight]``. On the 219 of the benchmark's 300 development stops that it
+scores (``wheels+accel`` tier), ``log G`` and ``log d_est`` correlate at 0.70 and ``G / d_est``
+spans 3.2x between its quartiles against 5.7x for ``G`` alone (``scripts/stop_weight_fit.py`` on
+``wsp-env benchmark --stops development --tier wheels+accel --policy none --policy classical
+--json F``): a rough but flatter scale. The weight
 is a constant of the stop, so potential-based shaping stays potential-based (its potential is
 scaled by the same constant).
 
@@ -56,6 +57,9 @@ class StopWeightConfig:
 def stop_weight(scenario: dict[str, Any], cfg: StopWeightConfig) -> float:
     """The weight of one stop's rewards from its scenario (``BrakingCore.describe``)."""
     v0 = float(scenario["speed_kmh"]) / 3.6
+    if scenario.get("mu_contaminated") is None:
+        raise ValueError("stop_weight: the stop has no adhesion level (mu_contaminated None); "
+                         "give one in the reset options or drop stop_weight")  # fmt: skip
     mu = float(scenario["mu_contaminated"])
     demand_g = float(scenario["demand_fraction"]) * cfg.demand_decel_mps2 / G_MPS2
     slope = math.sin(math.atan(float(scenario["gradient_permille"]) / 1000.0))
