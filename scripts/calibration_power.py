@@ -147,6 +147,14 @@ def demand_drop_draw(seed: int) -> dict[str, float]:
     return {"fraction": float(r.uniform(0.2, 0.6)), "factor": float(r.uniform(0.3, 0.6))}
 
 
+def with_demand_drop(scenario: Any, drop: dict[str, float]) -> Any:
+    """``scenario`` with its demand falling to ``drop["factor"]`` at ``drop["fraction"]`` of the
+    stop's rough duration at its contaminated level, ``V0 / (g mu)``."""
+    duration_s = scenario.speed_kmh / 3.6 / (9.81 * scenario.mu_contaminated)
+    return dataclasses.replace(scenario, demand_drop_s=drop["fraction"] * duration_s,
+                               demand_drop_factor=drop["factor"])  # fmt: skip
+
+
 def sliding_rail(seed: int) -> str:
     """The contaminant an adhesion-effect trace of ``seed`` is drawn on (``SLIDING_RAILS``),
     from its own stream: the scenario's other draws stay those of the seed."""
@@ -212,11 +220,8 @@ def _run_one(job: dict[str, Any]) -> dict[str, Any]:
 
     rng = np.random.default_rng(job["seed"])
     scenario = ind.random_scenario(rng, **job.get("overrides", {}))
-    if job.get("demand_drop"):  # the stop's rough duration at its contaminated level
-        drop = job["demand_drop"]
-        duration_s = scenario.speed_kmh / 3.6 / (9.81 * scenario.mu_contaminated)
-        scenario = dataclasses.replace(scenario, demand_drop_s=drop["fraction"] * duration_s,
-                                       demand_drop_factor=drop["factor"])  # fmt: skip
+    if job.get("demand_drop"):
+        scenario = with_demand_drop(scenario, job["demand_drop"])
     effects = [scaled_effect(ind, c, m, rng, scenario) for c, m in job["effects"]]
     t0 = time.perf_counter()
     columns, meta = ind.generate(scenario, effects, seed=job["seed"])
