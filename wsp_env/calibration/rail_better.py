@@ -14,13 +14,15 @@ does not do is stop the slides early while the brake keeps pressing as hard:
   ``residuals.MIN_SPEED_KMH``) is at least ``STOP_SPEED_FRACTION`` of the braking speed (the
   highest train speed logged). On a uniform contaminated rail the slides go on until the speed
   has fallen far (the adhesion's rise with falling speed, the rail's cleaning, end them late);
-* **the brake pressed harder than when they slid**: after the last slide the wheels rolled at a
-  cylinder pressure (median over axles and samples, above ``MIN_SPEED_KMH``) above the pressure
-  at which the slides began (median over the slide episodes of the highest pressure on their
-  axle in the ``ONSET_WINDOW_S`` up to the episode's start) by more than
-  ``PRESSURE_MARGIN_BAR`` (the coarsest pressure quantum in logged traces): the same wheels
-  carried more force than had made them slide — the inequality. A demand that falls (a driver
-  easing the brake) stops the slides too, but leaves the wheels rolling at a lower pressure;
+* **the brake pressed harder than when they slid** (``carried_more``): after the last slide the
+  wheels rolled at a cylinder pressure (median over axles and samples, above ``MIN_SPEED_KMH``)
+  at least ``ONSET_RATIO`` (1.05) times the pressure at which the slides began (median over the
+  slide episodes of the highest pressure on their axle in the ``ONSET_WINDOW_S`` up to the
+  episode's start), and by more than ``PRESSURE_MARGIN_BAR`` (the coarsest pressure quantum in
+  logged traces): the same wheels carried more force than had made them slide — the
+  inequality — by more than the few per cent the adhesion's rise as the speed falls gives. A
+  demand that falls (a driver easing the brake) stops the slides too, but leaves the wheels
+  rolling at a lower pressure;
 * **evidence on both sides**: at least ``MIN_SLIDES`` slide episode(s) before (a run of the
   sliding test above on one axle that began with the axle braked, ``traces.braked``: that wheel
   met the rail's limit at its onset pressure; a wheel that reads slow from the coasting on, a
@@ -28,14 +30,13 @@ does not do is stop the slides early while the brake keeps pressing as hard:
   ``MIN_SPEED_KMH``.
 
 The thresholds were chosen on an exploration of development traces of the independent generator
-(seed 5's range; not the study's), then checked with the committed study on seed 5
-(``scripts/calibration_power.py --seed 5 --clean 100 --demand-drop 30 --scenarios 30 --pairs 0
---categories rail_gets_better``, 220 traces): this rule added nothing to the 100 clean traces
-(one of them, a single slide on a wet rail at 78 % of the braking speed, is held off by the
-pressure test: the wheels rolled on at the pressure it began at) nor to the 30 whose demand
-falls (22 of them stop sliding above 35 % of the braking speed); it found x2 on 63 % of the
-traces, 93 % of the 15 where only censored evidence can show it, x3 on 83 % (91 % of 23). It is
-judged on the study's own seeds (``--seed 0``) and on fresh clean sets.
+(seed 5's range), then checked with the committed study on seed 5 (``scripts/calibration_power.py
+--seed 5 --clean 100 --demand-drop 30 --scenarios 30 --pairs 0 --categories rail_gets_better``).
+``ONSET_RATIO`` and the creep test came after the study's own run (``--seed 0``) showed the
+first version naming a better rail on 7 traces of other effects, most on wet or dry rail (a few
+slides near full pressure, then rolling a few per cent higher; a wheel a radius error leaves
+slow): on ``--seed 0`` those extras are therefore no independent figure, and fresh sets judge
+them (docs/calibration.md).
 
 The finding is reported as ``adhesion_position`` (a friction factor on the rail beyond a
 position), with the rail position where the slides stopped (``step_position_m``,
@@ -59,13 +60,19 @@ import numpy as np
 from scipy.integrate import cumulative_trapezoid
 
 from wsp_env.calibration.adhesion_estimate import CensoredPoints, CriticalPoints
-from wsp_env.calibration.adhesion_model import SLIDE_MIN_KMH, axle_offsets_m, slides_at_limit
+from wsp_env.calibration.adhesion_model import (
+    SLIDE_MIN_CREEP,
+    SLIDE_MIN_KMH,
+    axle_offsets_m,
+    slides_at_limit,
+)
 from wsp_env.calibration.residuals import MIN_SPEED_KMH
 from wsp_env.calibration.traces import Trace, braked
 
 STOP_SPEED_FRACTION = 0.35
 ONSET_WINDOW_S = 1.0
 PRESSURE_MARGIN_BAR = 0.05
+ONSET_RATIO = 1.05
 MIN_SLIDES = 1
 MIN_AFTER_S = 2.0
 
@@ -96,14 +103,28 @@ class RailBetter:
 
 def sliding_mask(trace: Trace) -> np.ndarray:
     """(samples, axles): an axle slower than both the train and the fastest axle by
-    ``SLIDE_MIN_KMH``, where the train runs above ``MIN_SPEED_KMH``."""
+    ``SLIDE_MIN_KMH``, and than the train by ``SLIDE_MIN_CREEP`` of its speed (a wheel a
+    radius or sensor error leaves a per cent slow is no slide), where the train runs above
+    ``MIN_SPEED_KMH``."""
     v_axle = trace.v_axle_kmh
     behind_train = trace.v_train_kmh[:, None] - v_axle
     if trace.n_axles > 1:
         depth = np.minimum(behind_train, np.nanmax(v_axle, axis=1)[:, None] - v_axle)
     else:
         depth = behind_train
-    return (depth >= SLIDE_MIN_KMH) & (trace.v_train_kmh >= MIN_SPEED_KMH)[:, None]
+    creep_ok = behind_train >= SLIDE_MIN_CREEP * trace.v_train_kmh[:, None]
+    return (depth >= SLIDE_MIN_KMH) & creep_ok & (trace.v_train_kmh >= MIN_SPEED_KMH)[:, None]
+
+
+def carried_more(after_bar: float, onset_bar: float) -> bool:
+    """The wheels rolled at a pressure above the one their slides began at by ``ONSET_RATIO``
+    (beyond the few per cent the adhesion's rise as the speed falls gives) and by
+    ``PRESSURE_MARGIN_BAR`` (the coarsest pressure quantum); False for NaN."""
+    return bool(
+        onset_bar > 0.0
+        and after_bar >= ONSET_RATIO * onset_bar
+        and after_bar > onset_bar + PRESSURE_MARGIN_BAR
+    )
 
 
 def slide_episodes(trace: Trace, sliding: np.ndarray) -> list[tuple[int, int, int]]:
@@ -139,7 +160,7 @@ def rail_gets_better(
         return None
     p_onset = slide_onset_pressure_bar(trace, episodes)
     p_after = float(np.nanmedian(trace.p_cyl_bar[after]))
-    if not (p_onset > 0.0 and p_after > p_onset + PRESSURE_MARGIN_BAR):
+    if not carried_more(p_after, p_onset):
         return None
     offsets = axle_offsets_m(trace)
     # the distance run, as the critical points and bounds place themselves
