@@ -28,7 +28,10 @@ Channels and their candidates (categories of DESIGN §8):
   either side, and judged against the law with a trend in train speed, which a step at one end
   of the stop would otherwise stand in for). All three only on a stop whose wheels slid
   (``ADHESION_MIN_SLIDES``): without a slide the critical points trace the creep curve's
-  initial slope, which carries normal loads and sensor offsets, not the rail's friction.
+  initial slope, which carries normal loads and sensor offsets, not the rail's friction. After
+  the loop, where no friction step was fitted, a rail that got better and stopped the slides is
+  named from the censored evidence alone (``rail_better``: the slides stop at speed while the
+  wheels roll on above the pressure they began sliding at).
 
 Pairs of one-parameter force effects (gradient, pad friction, unmeasured brake force) are also
 fitted jointly, so that two effects acting together are not absorbed by one two-parameter
@@ -268,8 +271,8 @@ def _discover(trace: Trace) -> Result:
 def _rail_better(loop: _Loop) -> None:
     """A rail that got better part-way and stopped the slides, found from the censored evidence
     alone (``rail_better``) where no friction step was fitted: an ``adhesion_position`` step
-    with the position the slides stopped at and a lower bound on the factor; the channel's error
-    is unchanged (nothing refitted)."""
+    with the position the slides stopped at and a censored reading of the factor (no fit); the
+    channel's error is unchanged (nothing refitted)."""
     result = loop.result
     if not loop.health[ADHESION]["usable"] or len(result.added) >= MAX_EFFECTS:
         return
