@@ -497,8 +497,7 @@ def _pct(rate: float) -> str:
 
 def _rate(row: dict[str, Any]) -> str:
     """A row's rate on sliding rails as text ("—" where none of its traces is on one)."""
-    rate = row.get("sliding_rate", math.nan)
-    return "—" if not math.isfinite(rate) else f"{100 * rate:.0f} %"
+    return _pct(row.get("sliding_rate", math.nan))
 
 
 def _by_geometry(rs: list[dict[str, Any]]) -> dict[str, dict[str, float]]:

@@ -2,7 +2,7 @@
 scale: on a benchmark JSON with ``none`` and ``classical`` runs (``wsp-env benchmark --stops
 development --json F``), the classical WSP's gain ``G = R_classical - R_none`` of each scored
 stop (``G >= MIN_GAIN``) against ``d_est``, the braking distance the weight is computed from
-(``1 / weight`` up to the reference and the clip). Prints the correlation of their logarithms and
+(``stop_weight.braking_distance_m``). Prints the correlation of their logarithms and
 the quartile spread (75th / 25th percentile) of ``G`` and of ``G / d_est``: the flatter the
 latter, the closer the weighted mean return is to the mean of the score's normalised returns.
 
@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from wsp_env.evaluation.benchmark import MIN_GAIN
-from wsp_env.training.stop_weight import StopWeightConfig, stop_weight
+from wsp_env.training.stop_weight import StopWeightConfig, braking_distance_m
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -31,8 +31,7 @@ def main(argv: list[str] | None = None) -> int:
     for name in ("none", "classical"):
         if not runs.get(name):
             raise SystemExit(f"{args.bench_json}: no runs of policy {name!r}")
-    # no clip: the distance itself
-    cfg = StopWeightConfig(reference_m=1.0, min_weight=1e-12, max_weight=1e12)
+    cfg = StopWeightConfig()
     gain, dist = [], []
     for c, n in zip(runs["classical"], runs["none"], strict=True):
         if (c["scenario"], c["seed"]) != (n["scenario"], n["seed"]):
@@ -40,7 +39,7 @@ def main(argv: list[str] | None = None) -> int:
         g = c["return"] - n["return"]
         if g >= MIN_GAIN:
             gain.append(g)
-            dist.append(1.0 / stop_weight(c["conditions"], cfg))
+            dist.append(braking_distance_m(c["conditions"], cfg))
     g, d = np.array(gain), np.array(dist)
 
     def spread(x: np.ndarray) -> float:

@@ -67,3 +67,41 @@ def local_ray():
                  logging_level=logging.ERROR)  # fmt: skip
     yield ray
     ray.shutdown()
+
+
+def independent_run(tmp_path, seed, effects=(), edit=None, **overrides):
+    """A trace of the independent generator (``calibration.independent``), written and read
+    back: the scenario of ``seed`` with ``overrides`` (``edit(scenario)`` applied after the
+    draw, before the effects'), its ``effects`` ``(category, magnitude)``. Returns the trace,
+    the scenario, the effects and the generator's columns."""
+    from wsp_env.calibration import independent as ind
+    from wsp_env.calibration.traces import read_trace
+
+    rng = np.random.default_rng(seed)
+    scenario = ind.random_scenario(rng, **overrides)
+    if edit is not None:
+        scenario = edit(scenario)
+    effs = [ind.random_effect(c, m, rng, scenario) for c, m in effects]
+    columns, meta = ind.generate(scenario, effs, seed=seed)
+    csv_path, _ = ind.write_trace(tmp_path / f"t{seed}", columns, meta)
+    return read_trace(csv_path), scenario, effs, columns
+
+
+def independent_trace(tmp_path, seed, effects=(), **overrides):
+    """``independent_run`` without the scenario: the trace, the effects, the columns."""
+    trace, _, effs, columns = independent_run(tmp_path, seed, effects, **overrides)
+    return trace, effs, columns
+
+
+def script(name: str):
+    """The module ``scripts/NAME.py`` (the scripts are no package)."""
+    import importlib
+    import sys
+    from pathlib import Path
+
+    scripts = str(Path(__file__).resolve().parents[1] / "scripts")
+    sys.path.insert(0, scripts)
+    try:
+        return importlib.import_module(name)
+    finally:
+        sys.path.remove(scripts)

@@ -6,22 +6,16 @@ from __future__ import annotations
 
 import json
 import math
-import sys
 from pathlib import Path
 
 import numpy as np
-
-SCRIPTS = Path(__file__).resolve().parents[1] / "scripts"
+from conftest import script
 
 
 def _study(tmp_path: Path, category: str, clean: int, demand_drop: int = 0) -> dict:
     """The study on one scenario per magnitude of ``category``, ``clean`` clean traces and
     ``demand_drop`` clean traces whose demand falls part-way, as its JSON gives it."""
-    sys.path.insert(0, str(SCRIPTS))
-    try:
-        import calibration_power as cp
-    finally:
-        sys.path.remove(str(SCRIPTS))
+    cp = script("calibration_power")
     out = tmp_path / "power.json"
     args = ["--scenarios", "1", "--clean", str(clean), "--pairs", "0", "--jobs", "1",
             "--categories", category, "--demand-drop", str(demand_drop),
@@ -57,11 +51,7 @@ def test_the_power_study_reports_the_adhesion_readings(tmp_path):
 def test_a_threshold_on_the_fitted_pitch_keeps_the_clean_traces_false_positives():
     """``pitch_threshold``: the lowest threshold at most 2 % of the clean traces reach (a clean
     trace without a fit reaches none) and the share of effect traces over it."""
-    sys.path.insert(0, str(SCRIPTS))
-    try:
-        import calibration_power as cp
-    finally:
-        sys.path.remove(str(SCRIPTS))
+    cp = script("calibration_power")
 
     def rows(pitches):
         return [{"adhesion_fits": {} if p is None else {"load_transfer": {
@@ -105,11 +95,7 @@ def test_the_power_study_says_which_choices_were_ties(tmp_path):
 
 
 def _null_script():
-    sys.path.insert(0, str(SCRIPTS))
-    try:
-        import friction_step_null as fsn
-    finally:
-        sys.path.remove(str(SCRIPTS))
+    fsn = script("friction_step_null")
     return fsn
 
 

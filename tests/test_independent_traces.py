@@ -12,10 +12,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import independent_trace
 
 from wsp_env.calibration import independent as ind
 from wsp_env.calibration.discovery import discover
-from wsp_env.calibration.traces import read_trace
 
 MODULE = Path(ind.__file__)
 
@@ -31,15 +31,6 @@ def test_generator_shares_no_code_with_the_project():
             names.add((node.module or "").split(".")[0])
     assert names <= {"__future__", "dataclasses", "json", "math", "collections", "pathlib",
                      "typing", "numpy"}, names  # fmt: skip
-
-
-def independent_trace(tmp_path, seed, effects=(), **overrides):
-    rng = np.random.default_rng(seed)
-    scenario = ind.random_scenario(rng, **overrides)
-    effs = [ind.random_effect(c, m, rng, scenario) for c, m in effects]
-    columns, meta = ind.generate(scenario, effs, seed=seed)
-    csv_path, _ = ind.write_trace(tmp_path / f"t{seed}", columns, meta)
-    return read_trace(csv_path), effs, columns
 
 
 def test_same_seed_same_trace_and_the_wheels_never_turn_backwards():

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import independent_run, script
 from scipy.integrate import cumulative_trapezoid
 
 from wsp_env.calibration import independent as ind
@@ -20,21 +21,17 @@ from wsp_env.calibration.rail_better import (
     STOP_SPEED_FRACTION,
     carried_more,
     rail_gets_better,
+    rail_readings,
     slide_episodes,
     slide_onset_pressure_bar,
     sliding_mask,
 )
 from wsp_env.calibration.residuals import MIN_SPEED_KMH
-from wsp_env.calibration.traces import read_trace
 
 
 def _trace(tmp_path, seed, effects=(), **overrides):
-    rng = np.random.default_rng(seed)
-    scenario = ind.random_scenario(rng, **overrides)
-    effs = [ind.random_effect(c, m, rng, scenario) for c, m in effects]
-    columns, meta = ind.generate(scenario, effs, seed=seed)
-    csv_path, _ = ind.write_trace(tmp_path / f"t{seed}", columns, meta)
-    return read_trace(csv_path), scenario, effs
+    trace, scenario, effs, _ = independent_run(tmp_path, seed, effects, **overrides)
+    return trace, scenario, effs
 
 
 @pytest.mark.parametrize(
@@ -69,29 +66,11 @@ def test_a_rail_that_gets_better_is_found_where_the_slides_stop(tmp_path, seed, 
     assert change_m - 0.4 * effect.params["position_m"] <= p["step_position_m"] <= change_m + 5.0
 
 
-def _power_study():
-    import sys
-    from pathlib import Path
-
-    scripts = str(Path(__file__).resolve().parents[1] / "scripts")
-    sys.path.insert(0, scripts)
-    try:
-        import calibration_power
-    finally:
-        sys.path.remove(scripts)
-    return calibration_power
-
-
 def _decisive(trace):
     """(speed fraction at the last slide, braking time after it, rolling pressure after, onset
-    pressure): what the rule reads."""
-    episodes = slide_episodes(trace, sliding_mask(trace))
-    last = max(end for _, _, end in episodes)
-    after = (np.arange(trace.time_s.size) > last) & (trace.v_train_kmh >= MIN_SPEED_KMH)
-    after_s = trace.time_s[np.flatnonzero(after)[-1]] - trace.time_s[last]
-    return (trace.v_train_kmh[last] / np.nanmax(trace.v_train_kmh), after_s,
-            float(np.nanmedian(trace.p_cyl_bar[after])),
-            slide_onset_pressure_bar(trace, episodes))  # fmt: skip
+    pressure): what the rule reads (``rail_readings``)."""
+    r = rail_readings(trace)
+    return r.stop_speed_fraction, r.after_s, r.after_bar, r.onset_bar
 
 
 @pytest.mark.parametrize("seed", [5900000, 5900016, 5900020])
@@ -100,13 +79,10 @@ def test_a_demand_that_falls_is_no_better_rail(tmp_path, seed):
     5``: ``calibration_power.with_demand_drop``): the slides stop at speed (78-81 % of the
     braking speed here) with braking time after, but the wheels roll on below the pressure the
     slides began at, so the pressure test, not an earlier one, rejects them."""
-    cp = _power_study()
-    rng = np.random.default_rng(seed)
-    scenario = ind.random_scenario(rng, contaminant=cp.sliding_rail(seed))
-    scenario = cp.with_demand_drop(scenario, cp.demand_drop_draw(seed))
-    columns, meta = ind.generate(scenario, [], seed=seed)
-    csv_path, _ = ind.write_trace(tmp_path / f"t{seed}", columns, meta)
-    trace = read_trace(csv_path)
+    cp = script("calibration_power")
+    drop = cp.demand_drop_draw(seed)
+    trace, _, _ = _trace(tmp_path, seed, contaminant=cp.sliding_rail(seed),
+                         edit=lambda sc: cp.with_demand_drop(sc, drop))  # fmt: skip
     fraction, after_s, p_after, p_onset = _decisive(trace)
     assert fraction >= STOP_SPEED_FRACTION and after_s >= MIN_AFTER_S
     assert not carried_more(p_after, p_onset)

@@ -14,6 +14,7 @@ from wsp_env.training.stop_weight import (
     G_MPS2,
     StopWeightConfig,
     StopWeightedReward,
+    braking_distance_m,
     stop_weight,
 )
 
@@ -126,7 +127,7 @@ def test_fit_script_reads_gain_against_distance(tmp_path, capsys):
     runs = {"none": [], "classical": []}
     for i, (speed, mu) in enumerate([(60, 0.05), (100, 0.05), (140, 0.08), (160, 0.03)]):
         cond = _scenario(speed, mu)
-        d = 1.0 / stop_weight(cond, StopWeightConfig(1.0, min_weight=1e-12, max_weight=1e12))
+        d = braking_distance_m(cond, CFG)
         runs["none"].append({"scenario": f"s{i}", "seed": i, "return": -3 * d / 100})
         runs["classical"].append({"scenario": f"s{i}", "seed": i, "return": -d / 100,
                                   "conditions": cond})  # fmt: skip

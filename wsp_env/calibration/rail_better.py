@@ -53,7 +53,6 @@ falls inflates it. The channel's error does not change (nothing is refitted): th
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -78,26 +77,44 @@ MIN_AFTER_S = 2.0
 
 
 @dataclass(frozen=True)
+class Readings:
+    """What the rule reads on a trace (``rail_readings``)."""
+
+    episodes: list[tuple[int, int, int]]  # the slide episodes (``slide_episodes``)
+    stop_speed_fraction: float  # train speed at the last slide / braking speed
+    after_s: float  # running time above ``MIN_SPEED_KMH`` after the last slide
+    onset_bar: float  # the pressure at which the slides began (``slide_onset_pressure_bar``)
+    after_bar: float  # the pressure the wheels rolled at after the last slide (median)
+
+    @property
+    def fires(self) -> bool:
+        """The module docstring's three tests."""
+        return (
+            len(self.episodes) >= MIN_SLIDES
+            and self.stop_speed_fraction >= STOP_SPEED_FRACTION
+            and self.after_s >= MIN_AFTER_S
+            and carried_more(self.after_bar, self.onset_bar)
+        )
+
+
+@dataclass(frozen=True)
 class RailBetter:
     """What the censored evidence shows (``rail_gets_better``)."""
 
     step_position_m: float  # the rail position where the slides stopped
     factor_reading: float  # the pressure or used-adhesion ratio, the larger (censored, no fit)
-    stop_speed_fraction: float  # train speed at the last slide / braking speed
-    onset_bar: float  # the pressure at which the slides began (median over episodes)
-    after_bar: float  # the pressure the wheels rolled at after the last slide (median)
-    slides: int  # slide episodes before
-    after_s: float  # braking time after the last slide
+    readings: Readings
 
     def as_params(self) -> dict[str, float]:
+        r = self.readings
         return {
             "step_position_m": self.step_position_m,
             "factor_beyond_step": self.factor_reading,
-            "pressure_ratio": self.after_bar / self.onset_bar if self.onset_bar > 0 else math.inf,
+            "pressure_ratio": r.after_bar / r.onset_bar,  # onset > 0: ``carried_more``
             "censored": 1.0,
-            "stop_speed_fraction": self.stop_speed_fraction,
-            "slide_onset_pressure_bar": self.onset_bar,
-            "rolling_pressure_after_bar": self.after_bar,
+            "stop_speed_fraction": r.stop_speed_fraction,
+            "slide_onset_pressure_bar": r.onset_bar,
+            "rolling_pressure_after_bar": r.after_bar,
         }
 
 
@@ -140,28 +157,33 @@ def slide_episodes(trace: Trace, sliding: np.ndarray) -> list[tuple[int, int, in
     return out
 
 
+def rail_readings(trace: Trace) -> Readings | None:
+    """The rule's readings on ``trace``; None without a slide episode or running after it."""
+    episodes = slide_episodes(trace, sliding_mask(trace))
+    if not episodes:
+        return None
+    last = max(end for _, _, end in episodes)
+    after = (np.arange(trace.time_s.size) > last) & (trace.v_train_kmh >= MIN_SPEED_KMH)
+    if not after.any():
+        return None
+    v_brake = float(np.nanmax(trace.v_train_kmh))
+    return Readings(
+        episodes=episodes,
+        stop_speed_fraction=float(trace.v_train_kmh[last] / v_brake) if v_brake > 0 else 0.0,
+        after_s=float(trace.time_s[np.flatnonzero(after)[-1]] - trace.time_s[last]),
+        onset_bar=slide_onset_pressure_bar(trace, episodes),
+        after_bar=float(np.nanmedian(trace.p_cyl_bar[after])),
+    )
+
+
 def rail_gets_better(
     trace: Trace, points: CriticalPoints, bounds: CensoredPoints
 ) -> RailBetter | None:
     """The module docstring's test on one trace: a ``RailBetter`` where it fires, else None."""
-    episodes = slide_episodes(trace, sliding_mask(trace))
-    if len(episodes) < MIN_SLIDES:
+    r = rail_readings(trace)
+    if r is None or not r.fires:
         return None
-    last = max(end for _, _, end in episodes)
-    v_brake = float(np.nanmax(trace.v_train_kmh))
-    fraction = float(trace.v_train_kmh[last] / v_brake) if v_brake > 0 else 0.0
-    if not fraction >= STOP_SPEED_FRACTION:
-        return None
-    after = (np.arange(trace.time_s.size) > last) & (trace.v_train_kmh >= MIN_SPEED_KMH)
-    if not after.any():
-        return None
-    after_s = float(trace.time_s[np.flatnonzero(after)[-1]] - trace.time_s[last])
-    if after_s < MIN_AFTER_S:
-        return None
-    p_onset = slide_onset_pressure_bar(trace, episodes)
-    p_after = float(np.nanmedian(trace.p_cyl_bar[after]))
-    if not carried_more(p_after, p_onset):
-        return None
+    episodes, p_onset, p_after = r.episodes, r.onset_bar, r.after_bar
     offsets = axle_offsets_m(trace)
     # the distance run, as the critical points and bounds place themselves
     run_m = cumulative_trapezoid(trace.v_train_kmh / 3.6, trace.time_s, initial=0.0)
@@ -179,7 +201,7 @@ def rail_gets_better(
             ref = np.array([level.get(int(a), float(np.median(mu))) for a in bounds.axle[beyond]])
             used = bounds.force_N[beyond] / bounds.normal_N[beyond]
             factor = max(factor, float(np.median(used / ref)))
-    return RailBetter(position, factor, fraction, p_onset, p_after, len(episodes), after_s)
+    return RailBetter(position, factor, r)
 
 
 def stop_position_m(
@@ -207,10 +229,8 @@ def slide_onset_pressure_bar(trace: Trace, episodes: list[tuple[int, int, int]])
     cells left out; NaN without an episode)."""
     dt = float(np.median(np.diff(trace.time_s))) if trace.time_s.size > 1 else 1.0
     window = max(1, round(ONSET_WINDOW_S / dt))
-    onsets = [
-        np.nanmax(trace.p_cyl_bar[max(0, i - window) : i + 1, a])
-        if np.isfinite(trace.p_cyl_bar[max(0, i - window) : i + 1, a]).any()
-        else np.nan
-        for a, i, _ in episodes
-    ]
-    return float(np.nanmedian(onsets)) if np.isfinite(onsets).any() else float("nan")
+    p = trace.p_cyl_bar
+    onsets = np.array([np.nanmax(p[max(0, i - window) : i + 1, a], initial=-np.inf)
+                       for a, i, _ in episodes])  # fmt: skip
+    onsets = onsets[np.isfinite(onsets)]
+    return float(np.median(onsets)) if onsets.size else float("nan")

@@ -54,18 +54,23 @@ class StopWeightConfig:
     max_weight: float = field(default=10.0, metadata={"gt": 0})
 
 
-def stop_weight(scenario: dict[str, Any], cfg: StopWeightConfig) -> float:
-    """The weight of one stop's rewards from its scenario (``BrakingCore.describe``)."""
-    v0 = float(scenario["speed_kmh"]) / 3.6
+def braking_distance_m(scenario: dict[str, Any], cfg: StopWeightConfig) -> float:
+    """``d_est`` (module docstring) of one stop from its scenario (``BrakingCore.describe``)."""
     if scenario.get("mu_contaminated") is None:
         raise ValueError("stop_weight: the stop has no adhesion level (mu_contaminated None); "
                          "give one in the reset options or drop stop_weight")  # fmt: skip
+    v0 = float(scenario["speed_kmh"]) / 3.6
     mu = float(scenario["mu_contaminated"])
     demand_g = float(scenario["demand_fraction"]) * cfg.demand_decel_mps2 / G_MPS2
     slope = math.sin(math.atan(float(scenario["gradient_permille"]) / 1000.0))
     a_est = max(G_MPS2 * (min(mu, demand_g) + slope), cfg.min_decel_mps2)
-    d_est = v0 * v0 / (2.0 * a_est)
-    return float(min(max(cfg.reference_m / d_est, cfg.min_weight), cfg.max_weight))
+    return v0 * v0 / (2.0 * a_est)
+
+
+def stop_weight(scenario: dict[str, Any], cfg: StopWeightConfig) -> float:
+    """The weight of one stop's rewards: ``reference_m / braking_distance_m``, clipped."""
+    w = cfg.reference_m / braking_distance_m(scenario, cfg)
+    return float(min(max(w, cfg.min_weight), cfg.max_weight))
 
 
 class StopWeightedReward(VecEnvWrapper):
