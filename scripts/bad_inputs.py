@@ -137,6 +137,9 @@ def _traces(d: Path) -> None:
     m = json.loads(meta)
     m["vehicle"]["bogie_cog_height_m"] = 0.5  # a bogie height without its mass
     spoil("bogie_no_mass", lines, json.dumps(m))
+    m = json.loads(meta)
+    m["vehicle"]["axle_offsets_m"] = [1000.0 * x for x in m["vehicle"]["axle_offsets_m"]]
+    spoil("offsets_mm", lines, json.dumps(m))  # the axles' places in millimetres
 
 
 def _env(**kwargs: Any) -> Any:
@@ -285,6 +288,7 @@ def cases() -> list[Case]:
         "not_a_report")  # fmt: skip
     cli(k, "a pivot height in millimetres", "bogie_pivot_height_m", "pivot_mm.csv")
     cli(k, "a bogie height without its mass", "bogie_mass_kg", "bogie_no_mass.csv")
+    cli(k, "the axles' places in millimetres", "axle_offsets_m", "offsets_mm.csv")
 
     b = "bench"
     cli(b, "zero repeats", "--repeats", "--repeats", "0")

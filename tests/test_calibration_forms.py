@@ -10,6 +10,7 @@ import dataclasses
 import numpy as np
 import pytest
 import yaml
+from conftest import independent_run
 from test_independent_traces import independent_trace
 
 from wsp_env.calibration.adhesion_estimate import bogie_pitch_kg, normal_loads
@@ -235,6 +236,51 @@ def test_with_a_pivot_height_the_nominal_loads_carry_the_bogie_pitch(tmp_path):
     k_body = normal_loads(without, a)[0] - static
     assert np.all(np.abs(k_body[0::2] - k_body[1::2]) < 1e-9)  # no pitch within a bogie
     assert float(np.abs(k_read - k_body).max()) > 1000.0  # kg: a bogie's pitch is tonnes
+
+
+@pytest.mark.parametrize("n_axles", [4, 16])
+def test_the_axles_places_along_the_train(tmp_path, n_axles):
+    """Each axle's distance behind axle 1 (where it meets the rail axle 1 met), against the
+    independent generator's own vehicle: exactly its list where the metadata gives one; from one
+    car's geometry otherwise, each car off by at most its ends' spread (the generator draws the
+    body 3.0-4.5 m past each pivot: a car pitch 3.0-6.5 m beyond its bogie centres and wheelbase,
+    the loop takes ``CAR_ENDS_M``); 0 everywhere with neither (unknown, not guessed)."""
+    from wsp_env.calibration import independent as ind
+    from wsp_env.calibration.adhesion_model import CAR_ENDS_M, axle_offsets_m
+
+    kw = {"n_axles": n_axles, "geometry_in_metadata": True}
+    listed, scenario, _, _ = independent_run(tmp_path, 5, offsets_in_metadata=True, **kw)
+    truth = ind._vehicle(scenario)["offset"]
+    assert np.allclose(axle_offsets_m(listed), truth, atol=1e-3)
+    assert np.allclose(listed.vehicle["axle_offsets_m"], truth, atol=1e-3)
+    geometry, _, _, _ = independent_run(tmp_path, 5, offsets_in_metadata=False, **kw)
+    assert "axle_offsets_m" not in geometry.vehicle
+    read = axle_offsets_m(geometry)
+    car = np.repeat(np.arange(n_axles // 4), 4)
+    # a car's pitch is L + 2 x (3.0 to 4.5 m): off the loop's L + w + CAR_ENDS_M by at most
+    wb = scenario.bogie_wheelbase_m
+    spread = max(abs(2 * 3.0 - wb - CAR_ENDS_M), abs(2 * 4.5 - wb - CAR_ENDS_M))
+    assert np.all(np.abs(read - truth) <= car * spread + 0.01)
+    assert np.all(np.diff(read) > 0.0)
+    bare, _, _, _ = independent_run(tmp_path, 5, geometry_in_metadata=False, n_axles=n_axles)
+    assert not np.any(axle_offsets_m(bare))
+
+
+def test_a_simulated_trace_lists_the_axles_places(tmp_path):
+    """The project's own traces (``wsp-env simulate --trace``) give every axle's place from the
+    vehicle's bogies: the ETR1000's 32 axles over its eight cars, as its config places them."""
+    from wsp_env.calibration.adhesion_model import axle_offsets_m
+    from wsp_env.calibration.synthetic import simulate_trace
+    from wsp_env.calibration.traces import read_trace
+    from wsp_env.core.config import load_rail, load_vehicle
+
+    veh = load_vehicle("etr1000")
+    csv_path, _, _ = simulate_trace(tmp_path / "t", load_rail("dry"), 40.0, vehicle=veh)
+    trace = read_trace(csv_path)
+    bogies = [b.position_m for b in veh.bogies]
+    want = np.concatenate([[p - b.wheelbase_m / 2, p + b.wheelbase_m / 2]
+                           for p, b in zip(bogies, veh.bogies, strict=True)])  # fmt: skip
+    assert np.allclose(axle_offsets_m(trace), want - want[0], atol=1e-3)
 
 
 def _both_table(m, best, gain, noise=0.0, seed=0):

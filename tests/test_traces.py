@@ -122,6 +122,7 @@ def _mutations():
         m["vehicle"]["n_axles"] = 2
         m["vehicle"].pop("axle_static_load_kN")
         m["vehicle"].pop("axle_load_transfer_kN_per_mps2")
+        m["vehicle"].pop("axle_offsets_m")
         return h, rows, m
 
     def short_transfer(h, rows, m):
@@ -173,8 +174,28 @@ def _mutations():
         m["vehicle"]["bogie_mass_kg"] = 25000.0
         return h, rows, m
 
+    def offsets_short(h, rows, m):
+        m["vehicle"]["axle_offsets_m"] = [0.0, 2.5]
+        return h, rows, m
+
+    def offsets_not_from_axle_1(h, rows, m):
+        m["vehicle"]["axle_offsets_m"] = [1.0, 3.5, 20.0, 22.5]
+        return h, rows, m
+
+    def offsets_out_of_order(h, rows, m):
+        m["vehicle"]["axle_offsets_m"] = [0.0, 2.5, 1.0, 22.5]
+        return h, rows, m
+
+    def offsets_in_mm(h, rows, m):
+        m["vehicle"]["axle_offsets_m"] = [0.0, 2500.0, 19000.0, 21500.0]
+        return h, rows, m
+
     return [
         (drop_axle, "'p_cyl_3_bar': required but missing"),
+        (offsets_short, "vehicle.axle_offsets_m: must list one number per axle"),
+        (offsets_not_from_axle_1, "vehicle.axle_offsets_m: axle 1's must be 0"),
+        (offsets_out_of_order, "vehicle.axle_offsets_m: axle 3 (1 m) is ahead of axle 2"),
+        (offsets_in_mm, "vehicle.axle_offsets_m: the last axle 21500 m behind the first"),
         (time_back, "'time_s': not strictly increasing"),
         (long_gap, "'v_train_kmh': 6 missing samples in a row"),
         (kpa, "'p_cyl_1_bar'"),

@@ -86,13 +86,29 @@ SLIDE_MIN_KMH = 2.0
 SPEED_TREND_MAX = 1.0
 
 
+# A car's coupled length beyond its outer axles, front and rear together (m): a 4c-axle rake
+# whose metadata gives one car's bogie geometry but not the axles' positions is read as cars
+# ``bogie_centre_distance_m + bogie_wheelbase_m + CAR_ENDS_M`` long (UIC-Z1: 26.4 m over buffers
+# on 19 m bogie centres and 2.56 m wheelbases, 4.8 m; ETR1000: 25.9 m car pitch on 17.5 m and
+# 2.7 m, 5.7 m). A few metres per car off is below the step grid's spacing on a stop.
+CAR_ENDS_M = 5.2
+
+
 def axle_offsets_m(trace: Trace) -> np.ndarray:
-    """Distance of each axle behind axle 1, from the metadata's bogie geometry when it
-    describes a two-bogie vehicle, else 0 (the vehicle is short against a stop)."""
+    """Distance of each axle behind axle 1 (m), in running order: the metadata's
+    ``axle_offsets_m`` where it gives them; else from one car's bogie geometry
+    (``bogie_centre_distance_m``, ``bogie_wheelbase_m``) for a rake of ``n_axles / 4`` such cars,
+    ``CAR_ENDS_M`` between the outer axles of neighbouring cars; else 0 (unknown: every axle
+    placed at the front, ``rail_better.stop_position_m`` then reads the front axle)."""
     veh, n = trace.vehicle, trace.n_axles
+    listed = veh.get("axle_offsets_m")
+    if listed is not None:
+        return np.asarray(listed, dtype=float)
     L, b = veh.get("bogie_centre_distance_m"), veh.get("bogie_wheelbase_m")
-    if n == 4 and L and b:
-        return np.array([0.0, b, L, L + b], dtype=float)
+    if n % 4 == 0 and L and b:
+        car = np.array([0.0, b, L, L + b], dtype=float)
+        pitch = L + b + CAR_ENDS_M
+        return np.concatenate([car + c * pitch for c in range(n // 4)])
     return np.zeros(n)
 
 

@@ -145,7 +145,9 @@ Only nominal data: format, test_id, sample_period_s, initial_speed_kmh, contamin
 brake_type and vehicle {name, mass_kg, n_axles, wheel_radius_m (nominal),
 wheelset_inertia_kgm2, axle_static_load_kN, cog_height_m, bogie_centre_distance_m,
 bogie_wheelbase_m (all three left out when ``geometry_in_metadata`` is False; with them
-``bogie_pivot_height_m`` where ``pivot_in_metadata``: half of the random scenarios), brake
+``bogie_pivot_height_m`` where ``pivot_in_metadata``: half of the random scenarios; and
+``axle_offsets_m``, each axle's distance behind axle 1, where ``offsets_in_metadata``: half of
+those with geometry), brake
 {p_threshold_bar, torque_gain_Nm_per_bar, p_max_bar}, resistance {a_N, b_N_per_mps,
 c_N_per_mps2}}. With ``transfer_list_in_metadata`` (default False) it also gives
 ``axle_load_transfer_kN_per_mps2``: the NOMINAL body + bogie pitch transfer per axle. The
@@ -336,6 +338,7 @@ class Scenario:
     geometry_in_metadata: bool = True
     pivot_in_metadata: bool = False
     transfer_list_in_metadata: bool = False
+    offsets_in_metadata: bool = False
     record_tail_s: float = 1.0
     max_duration_s: float = 300.0
 
@@ -487,6 +490,8 @@ def random_scenario(rng: np.random.Generator, **overrides: Any) -> Scenario:
     # give the bogie pivot height (50 % of all)
     own = np.random.default_rng([int(d["seed"]), 25])
     d["pivot_in_metadata"] = bool(pick("pivot_in_metadata", bool(own.random() < 2.0 / 3.0)))
+    # and, drawn after it on the same stream, each axle's position along the train in one in two
+    d["offsets_in_metadata"] = bool(pick("offsets_in_metadata", bool(own.random() < 0.5)))
     d["demand_drop_s"] = float(pick("demand_drop_s", 0.0))  # overrides only: the stream stays
     d["demand_drop_factor"] = float(pick("demand_drop_factor", 1.0))
     if not d["demand_drop_s"] >= 0.0:
@@ -1173,6 +1178,8 @@ def _metadata(sc: Scenario, sim: dict[str, Any]) -> dict:
         veh["bogie_wheelbase_m"] = round(sc.bogie_wheelbase_m, 3)
         if sc.pivot_in_metadata:
             veh["bogie_pivot_height_m"] = round(sc.bogie_pivot_height_m, 3)
+        if sc.offsets_in_metadata:
+            veh["axle_offsets_m"] = [round(float(x), 3) for x in _vehicle(sc)["offset"]]
         if sc.transfer_list_in_metadata:
             k_nom = _vehicle(sc)["k"]
             veh["axle_load_transfer_kN_per_mps2"] = [round(float(x) / 1000, 3) for x in k_nom]

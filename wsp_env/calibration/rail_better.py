@@ -210,9 +210,9 @@ def stop_position_m(
     """The rail position beyond which no axle slid, and the one axle it was read from where that
     matters: each axle's last slide placed on the rail (the distance run then, less its offset
     behind axle 1), the furthest of them (axle None). Where the offsets are unknown
-    (``axle_offsets_m`` gives them for one two-bogie vehicle, zeros for a longer train) a rear
-    axle's place would be read a train length too far, so the axle nearest the front that slid
-    is taken instead."""
+    (``axle_offsets_m`` gives zeros: neither the axles' positions nor a car's geometry in the
+    metadata) a rear axle's place would be read a train length too far, so the axle nearest the
+    front that slid is taken instead."""
     last: dict[int, int] = {}
     for a, _, end in episodes:
         last[a] = max(last.get(a, end), end)

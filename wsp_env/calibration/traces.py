@@ -195,6 +195,7 @@ def _read_meta(csv_path: Path) -> tuple[Path, dict[str, Any]]:
         ):
             raise _fail(meta_path, f"vehicle.{key}: must list one number per axle")
     _check_geometry(meta_path, veh)
+    _check_axle_offsets(meta_path, veh)
     brake = veh.get("brake", {})
     gains = brake.get("axle_torque_gain_Nm_per_bar") if isinstance(brake, dict) else None
     if gains is not None and (
@@ -245,6 +246,35 @@ def _check_geometry(meta_path: Path, veh: dict[str, Any]) -> None:
     if (veh.get("bogie_cog_height_m") is None) != (mb is None):
         raise _fail(meta_path, "vehicle.bogie_cog_height_m and bogie_mass_kg: give both or "
                     "neither (the bogie's own pitch needs its mass and its height)")  # fmt: skip
+
+
+# the optional per-axle positions along the train (m behind axle 1): a train up to this long
+MAX_TRAIN_LENGTH_M = 1000.0
+
+
+def _check_axle_offsets(meta_path: Path, veh: dict[str, Any]) -> None:
+    """One line where the optional ``vehicle.axle_offsets_m`` is not each axle's distance behind
+    axle 1 in running order: one number per axle, the first 0, never falling, within
+    ``MAX_TRAIN_LENGTH_M``."""
+    off = veh.get("axle_offsets_m")
+    if off is None:
+        return
+    field = "vehicle.axle_offsets_m"
+    numbers = isinstance(off, list) and all(
+        isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x) for x in off
+    )
+    if not numbers or len(off) != veh["n_axles"]:
+        raise _fail(meta_path, f"{field}: must list one number per axle")
+    if off[0] != 0:
+        raise _fail(meta_path, f"{field}: axle 1's must be 0 (distances behind axle 1), got "
+                    f"{off[0]!r}")  # fmt: skip
+    for i in range(1, len(off)):
+        if off[i] < off[i - 1]:
+            raise _fail(meta_path, f"{field}: axle {i + 1} ({off[i]:g} m) is ahead of axle {i} "
+                        f"({off[i - 1]:g} m): list the axles in running order")  # fmt: skip
+    if off[-1] > MAX_TRAIN_LENGTH_M:
+        raise _fail(meta_path, f"{field}: the last axle {off[-1]:g} m behind the first: more "
+                    f"than a {MAX_TRAIN_LENGTH_M:g} m train (metres?)")  # fmt: skip
 
 
 def _read_csv(path: Path) -> tuple[list[str], list[list[str]]]:

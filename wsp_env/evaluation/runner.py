@@ -363,6 +363,9 @@ def trace_metadata(
         "wheel_radius_m": vehicle.wheel_radius_m,
         "wheelset_inertia_kgm2": vehicle.wheelset_inertia_kgm2,
         "axle_static_load_kN": [round(x / 1e3, 3) for x in sim_arrays.load_ref_N],
+        # optional: each axle's distance behind axle 1 (the rail an axle meets, calibration's
+        # friction change along the rail)
+        "axle_offsets_m": [round(float(x), 3) for x in sim_arrays.offsets_m],
         # optional (docs/trace_format.md): the quasi-static load transfer per axle that the
         # vehicle's documents (its config: pivot and frame heights) give, body and bogie pitch
         # together; calibration reads it when present
