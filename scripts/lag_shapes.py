@@ -8,6 +8,12 @@ on (not the power study's).
 
     .venv/bin/python scripts/lag_shapes.py [--discover]              # ~45 s (~100 s)
     .venv/bin/python scripts/lag_shapes.py --power runs/power.json   # the study's pair traces
+    .venv/bin/python scripts/lag_shapes.py --power runs/power.json --dry-rails   # ~30 s
+
+``--dry-rails``: the study's lag traces on a wet or dry rail (no wheel slides, so the balance
+alone decides), each shape's balance RMSE after the loop's fit against the channel's noise floor
+(from the added step's cut and its cut over the floor): how far apart the balance puts the
+shapes, in noise floors, where the tie margin is half of one.
 """
 
 from __future__ import annotations
@@ -61,11 +67,52 @@ def one(seed: int, effects: list[tuple[str, float]], overrides: dict[str, Any],
     return row
 
 
+def dry_rails(results: list[dict[str, Any]]) -> int:
+    """Each lag trace of a study on a wet or dry rail: the balance RMSE after the chosen lag and
+    after each other shape the loop named inside the tie margin, in noise floors."""
+    from wsp_env.calibration.discovery import discover
+
+    lag_cats = {"pressure_lag", "pressure_time_constant"}
+    spans: list[float] = []
+    for r in results:
+        cats = {e[0] for e in r["effects"]}
+        if not cats & lag_cats or cats - lag_cats or r["contaminant"] not in ("wet", "dry"):
+            continue
+        steps = [s for s in discover(read(r["seed"], r["effects"], r.get("overrides", {}))).added
+                 if s.category == "pressure_lag"]  # fmt: skip
+        if not steps:
+            print(f"seed {r['seed']:7d} {r['contaminant']:4s} {r['effects']}: no lag added")
+            continue
+        s = steps[0]
+        cut, over = s.confidence["cut_pct"] / 100.0, s.confidence["cut_over_noise_floor"]
+        floor = (s.after / (1.0 - cut) - s.after) / over  # km/h
+        forms = {s.name: s.after} | {a["name"]: a["after"] for a in s.alternative_fits
+                                     if a["effect"] == "pressure_lag"}  # fmt: skip
+        span = (max(forms.values()) - min(forms.values())) / floor
+        spans.append(span)
+        shown = ", ".join(f"{n} {(v - s.after) / floor:+.3f}" for n, v in forms.items())
+        print(
+            f"seed {r['seed']:7d} {r['contaminant']:4s} {r['effects']}: floor {floor:.3f} km/h, "
+            f"after the chosen {s.after / floor:.2f} floors; the shapes, against it: {shown}"
+        )
+    if spans:
+        print(
+            f"{len(spans)} traces: the shapes' balance fits lie within {max(spans):.3f} noise "
+            f"floors of each other (median {np.median(spans):.3f}); the tie margin is 0.5"
+        )
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--discover", action="store_true", help="also run the calibration loop")
     ap.add_argument("--power", help="a power study's JSON: its both-shapes pair traces instead")
+    ap.add_argument("--dry-rails", action="store_true",
+                    help="with --power: the lag traces on wet or dry rail, the shapes' balance "
+                    "fits in noise floors")  # fmt: skip
     args = ap.parse_args(argv)
+    if args.power and args.dry_rails:
+        return dry_rails(json.loads(Path(args.power).read_text(encoding="utf-8"))["results"])
     if args.power:
         results = json.loads(Path(args.power).read_text(encoding="utf-8"))["results"]
         pair = [
