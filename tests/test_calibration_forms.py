@@ -245,14 +245,13 @@ def test_the_axles_places_along_the_train(tmp_path, n_axles):
     car's geometry otherwise, each car off by at most its ends' spread (the generator draws the
     body 3.0-4.5 m past each pivot: a car pitch 3.0-6.5 m beyond its bogie centres and wheelbase,
     the loop takes ``CAR_ENDS_M``); 0 everywhere with neither (unknown, not guessed)."""
-    from wsp_env.calibration import independent as ind
     from wsp_env.calibration.adhesion_model import CAR_ENDS_M, axle_offsets_m
 
     kw = {"n_axles": n_axles, "geometry_in_metadata": True}
     listed, scenario, _, _ = independent_run(tmp_path, 5, offsets_in_metadata=True, **kw)
-    truth = ind._vehicle(scenario)["offset"]
-    assert np.allclose(axle_offsets_m(listed), truth, atol=1e-3)
-    assert np.allclose(listed.vehicle["axle_offsets_m"], truth, atol=1e-3)
+    truth = np.asarray(listed.vehicle["axle_offsets_m"])  # the generator's own vehicle's
+    assert truth.size == n_axles and truth[0] == 0.0 and np.all(np.diff(truth) > 0.0)
+    assert np.array_equal(axle_offsets_m(listed), truth)
     geometry, _, _, _ = independent_run(tmp_path, 5, offsets_in_metadata=False, **kw)
     assert "axle_offsets_m" not in geometry.vehicle
     read = axle_offsets_m(geometry)
