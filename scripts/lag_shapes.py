@@ -111,6 +111,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="with --power: the lag traces on wet or dry rail, the shapes' balance "
                     "fits in noise floors")  # fmt: skip
     args = ap.parse_args(argv)
+    if args.dry_rails and not args.power:
+        ap.error("--dry-rails needs --power (a power study's JSON)")
     if args.power and args.dry_rails:
         return dry_rails(json.loads(Path(args.power).read_text(encoding="utf-8"))["results"])
     if args.power:

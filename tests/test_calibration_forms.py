@@ -6,6 +6,7 @@ optional vehicle geometry in ``wsp-trace/1``. Judged on the independent generato
 from __future__ import annotations
 
 import dataclasses
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -241,28 +242,31 @@ def test_with_a_pivot_height_the_nominal_loads_carry_the_bogie_pitch(tmp_path):
 @pytest.mark.parametrize("n_axles", [4, 16])
 def test_the_axles_places_along_the_train(tmp_path, n_axles):
     """Each axle's distance behind axle 1 (where it meets the rail axle 1 met), against the
-    independent generator's own vehicle: exactly its list where the metadata gives one; from one
-    car's geometry otherwise, each car off by at most its ends' spread (the generator draws the
-    body 3.0-4.5 m past each pivot: a car pitch 3.0-6.5 m beyond its bogie centres and wheelbase,
-    the loop takes ``CAR_ENDS_M``); 0 everywhere with neither (unknown, not guessed)."""
+    independent generator's vehicle as its docstring lays it out (cars ``L + 2 overhang`` long,
+    each car's axles at ``0, w, L, L + w`` from its first): exactly where the metadata lists
+    them; from one car's geometry otherwise, each car behind the first off by exactly the
+    difference of its ends (``w + CAR_ENDS_M`` taken, ``2 overhang`` drawn: at most a few metres,
+    below the friction step's grid); 0 everywhere with neither (unknown, not guessed)."""
     from wsp_env.calibration.adhesion_model import CAR_ENDS_M, axle_offsets_m
 
     kw = {"n_axles": n_axles, "geometry_in_metadata": True}
     listed, scenario, _, _ = independent_run(tmp_path, 5, offsets_in_metadata=True, **kw)
-    truth = np.asarray(listed.vehicle["axle_offsets_m"])  # the generator's own vehicle's
-    assert truth.size == n_axles and truth[0] == 0.0 and np.all(np.diff(truth) > 0.0)
-    assert np.array_equal(axle_offsets_m(listed), truth)
+    L, wb, over = (scenario.bogie_centre_distance_m, scenario.bogie_wheelbase_m,
+                   scenario.car_overhang_m)  # fmt: skip
+    car = np.repeat(np.arange(n_axles // 4), 4)
+    truth = car * (L + 2 * over) + np.tile([0.0, wb, L, L + wb], n_axles // 4)
+    assert np.allclose(axle_offsets_m(listed), truth, atol=1e-3)  # the metadata rounds to mm
     geometry, _, _, _ = independent_run(tmp_path, 5, offsets_in_metadata=False, **kw)
     assert "axle_offsets_m" not in geometry.vehicle
     read = axle_offsets_m(geometry)
-    car = np.repeat(np.arange(n_axles // 4), 4)
-    # a car's pitch is L + 2 x (3.0 to 4.5 m): off the loop's L + w + CAR_ENDS_M by at most
-    wb = scenario.bogie_wheelbase_m
-    spread = max(abs(2 * 3.0 - wb - CAR_ENDS_M), abs(2 * 4.5 - wb - CAR_ENDS_M))
-    assert np.all(np.abs(read - truth) <= car * spread + 0.01)
+    assert np.allclose(read - truth, car * (wb + CAR_ENDS_M - 2 * over), atol=0.01)
     assert np.all(np.diff(read) > 0.0)
     bare, _, _, _ = independent_run(tmp_path, 5, geometry_in_metadata=False, n_axles=n_axles)
     assert not np.any(axle_offsets_m(bare))
+    # another axle count with one car's geometry (a locomotive with two three-axle bogies): not a
+    # rake of such cars, so unknown
+    six = SimpleNamespace(vehicle={**geometry.vehicle, "n_axles": 6}, n_axles=6)
+    assert np.array_equal(axle_offsets_m(six), np.zeros(6))
 
 
 def test_a_simulated_trace_lists_the_axles_places(tmp_path):

@@ -56,6 +56,11 @@ def _broken_vehicle(tmp_path, mutate) -> Path:
         (lambda d: d.update(wheel_radus_m=0.4), "wheel_radus_m: unknown field"),
         (lambda d: d["brake"].update(valve_group="train"), "brake.valve_group: 'train' is not one"),
         (lambda d: d["cars"][0].update(bogies=[0, 7]), "cars[0].bogies: index out of range"),
+        # bogies 2 m apart with 2.56 m wheelbases: the second's first axle ahead of the first's last
+        (
+            lambda d: d["bogies"][1].update(position_m=d["bogies"][0]["position_m"] + 2.0),
+            "bogies[1]: its first axle",
+        ),
     ],
 )
 def test_bad_vehicle_config_names_file_and_field(tmp_path, mutate, field):

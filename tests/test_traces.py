@@ -186,13 +186,38 @@ def _mutations():
         m["vehicle"]["axle_offsets_m"] = [0.0, 2.5, 1.0, 22.5]
         return h, rows, m
 
+    def offsets_nan(h, rows, m):
+        m["vehicle"]["axle_offsets_m"] = [0.0, float("nan"), 19.0, 21.5]
+        return h, rows, m
+
+    def offsets_bool(h, rows, m):
+        m["vehicle"]["axle_offsets_m"] = [0.0, True, 19.0, 21.5]
+        return h, rows, m
+
+    def offsets_nested(h, rows, m):
+        m["vehicle"]["axle_offsets_m"] = [0.0, [2.5], 19.0, 21.5]
+        return h, rows, m
+
+    def offsets_huge(h, rows, m):  # an integer no float holds
+        m["vehicle"]["axle_offsets_m"] = [0, 2, 19, 10**400]
+        return h, rows, m
+
+    def offsets_text(h, rows, m):
+        m["vehicle"]["axle_offsets_m"] = "0, 2.5, 19, 21.5"
+        return h, rows, m
+
     def offsets_in_mm(h, rows, m):
         m["vehicle"]["axle_offsets_m"] = [0.0, 2500.0, 19000.0, 21500.0]
         return h, rows, m
 
     return [
         (drop_axle, "'p_cyl_3_bar': required but missing"),
-        (offsets_short, "vehicle.axle_offsets_m: must list one number per axle"),
+        (offsets_short, "vehicle.axle_offsets_m: must list one number per axle (2 numbers for 4"),
+        (offsets_nan, "vehicle.axle_offsets_m: must list one number per axle (axle 2: 'nan')"),
+        (offsets_bool, "vehicle.axle_offsets_m: must list one number per axle (axle 2: 'True')"),
+        (offsets_nested, "vehicle.axle_offsets_m: must list one number per axle (axle 2:"),
+        (offsets_huge, "vehicle.axle_offsets_m: must list one number per axle (axle 4:"),
+        (offsets_text, "vehicle.axle_offsets_m: must list one number per axle (got str)"),
         (offsets_not_from_axle_1, "vehicle.axle_offsets_m: axle 1's must be 0"),
         (offsets_out_of_order, "vehicle.axle_offsets_m: axle 3 (1 m) is ahead of axle 2"),
         (offsets_in_mm, "vehicle.axle_offsets_m: the last axle 21500 m behind the first"),

@@ -188,26 +188,42 @@ def _read_meta(csv_path: Path) -> tuple[Path, dict[str, Any]]:
         per_axle = veh.get(key)
         if per_axle is None:
             continue
-        if (
-            not isinstance(per_axle, list)
-            or len(per_axle) != veh["n_axles"]
-            or not all(isinstance(x, int | float) and math.isfinite(x) for x in per_axle)
-        ):
-            raise _fail(meta_path, f"vehicle.{key}: must list one number per axle")
+        problem = _per_axle_problem(per_axle, int(veh["n_axles"]))
+        if problem:
+            raise _fail(meta_path, f"vehicle.{key}: must list one number per axle ({problem})")
     _check_geometry(meta_path, veh)
     _check_axle_offsets(meta_path, veh)
     brake = veh.get("brake", {})
     gains = brake.get("axle_torque_gain_Nm_per_bar") if isinstance(brake, dict) else None
-    if gains is not None and (
-        not isinstance(gains, list)
-        or len(gains) != veh["n_axles"]
-        or not all(isinstance(x, int | float) and math.isfinite(x) and x > 0 for x in gains)
-    ):
+    problem = None if gains is None else _per_axle_problem(gains, int(veh["n_axles"]), True)
+    if problem:
         raise _fail(
             meta_path, "vehicle.brake.axle_torque_gain_Nm_per_bar: must list one positive "
-            "number per axle"
+            f"number per axle ({problem})"
         )  # fmt: skip
     return meta_path, meta
+
+
+def _finite(x: Any) -> bool:
+    """A JSON number (not a boolean) that is finite; an integer too large for a float is not."""
+    if isinstance(x, bool) or not isinstance(x, int | float):
+        return False
+    try:
+        return math.isfinite(x)
+    except OverflowError:
+        return False
+
+
+def _per_axle_problem(values: Any, n_axles: int, positive: bool = False) -> str | None:
+    """What is wrong with a per-axle list of the metadata, in a few words, or ``None``."""
+    if not isinstance(values, list):
+        return f"got {type(values).__name__}"
+    if len(values) != n_axles:
+        return f"{len(values)} numbers for {n_axles} axles"
+    for i, x in enumerate(values, start=1):
+        if not _finite(x) or (positive and not x > 0):
+            return f"axle {i}: {str(x)[:20]!r}"
+    return None
 
 
 # Optional vehicle geometry (one car; ``docs/trace_format.md``): name -> (low, high) bounds,
@@ -260,14 +276,12 @@ def _check_axle_offsets(meta_path: Path, veh: dict[str, Any]) -> None:
     if off is None:
         return
     field = "vehicle.axle_offsets_m"
-    numbers = isinstance(off, list) and all(
-        isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x) for x in off
-    )
-    if not numbers or len(off) != veh["n_axles"]:
-        raise _fail(meta_path, f"{field}: must list one number per axle")
+    problem = _per_axle_problem(off, int(veh["n_axles"]))
+    if problem:
+        raise _fail(meta_path, f"{field}: must list one number per axle ({problem})")
     if off[0] != 0:
-        raise _fail(meta_path, f"{field}: axle 1's must be 0 (distances behind axle 1), got "
-                    f"{off[0]!r}")  # fmt: skip
+        raise _fail(meta_path, f"{field}: axle 1's must be 0 (distances behind axle 1, axle 1 "
+                    f"first), got {off[0]!r}")  # fmt: skip
     for i in range(1, len(off)):
         if off[i] < off[i - 1]:
             raise _fail(meta_path, f"{field}: axle {i + 1} ({off[i]:g} m) is ahead of axle {i} "

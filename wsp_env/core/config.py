@@ -262,6 +262,13 @@ class VehicleConfig:
         pos = [b.position_m for b in self.bogies]
         if any(b <= a for a, b in itertools.pairwise(pos)):
             raise ConfigError(f"{prefix}bogies: positions must increase in running order")
+        # each bogie's axles (wheelbase_m apart, centred on its position) behind the one's ahead
+        for i, (ahead, behind) in enumerate(itertools.pairwise(self.bogies), start=1):
+            last = ahead.position_m + ahead.wheelbase_m * (ahead.n_axles - 1) / 2
+            first = behind.position_m - behind.wheelbase_m * (behind.n_axles - 1) / 2
+            if first <= last:
+                raise ConfigError(f"{prefix}bogies[{i}]: its first axle ({first:g} m) is not "
+                                  f"behind the last axle of bogies[{i - 1}] ({last:g} m)")  # fmt: skip
         carried = {b for car in self.cars for b in car.bogies}
         if carried != set(range(n)):
             missing = sorted(set(range(n)) - carried)
