@@ -267,8 +267,10 @@ class VehicleConfig:
             last = ahead.position_m + ahead.wheelbase_m * (ahead.n_axles - 1) / 2
             first = behind.position_m - behind.wheelbase_m * (behind.n_axles - 1) / 2
             if first <= last:
-                raise ConfigError(f"{prefix}bogies[{i}]: its first axle ({first:g} m) is not "
-                                  f"behind the last axle of bogies[{i - 1}] ({last:g} m)")  # fmt: skip
+                raise ConfigError(
+                    f"{prefix}bogies[{i}]: its first axle ({first:g} m) is not behind the last "
+                    f"axle of bogies[{i - 1}] ({last:g} m)"
+                )
         carried = {b for car in self.cars for b in car.bogies}
         if carried != set(range(n)):
             missing = sorted(set(range(n)) - carried)
