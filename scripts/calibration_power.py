@@ -562,19 +562,28 @@ def pitch_threshold(clean: list[dict[str, Any]], rs: list[dict[str, Any]]) -> di
     return best
 
 
-def clean_pitch_readings(results: list[dict[str, Any]]) -> dict[str, float]:
+def clean_pitch_readings(results: list[dict[str, Any]]) -> dict[str, Any]:
     """On clean traces: the fitted bogie pitch less the generator's undeclared one (kN per
-    m/s^2), where the loop could fit it: the scatter a load transfer must stand out of."""
-    diff = [
-        r["adhesion_fits"]["load_transfer"]["bogie_pitch_kN_per_mps2"]
-        - r["true_bogie_pitch_kN_per_mps2"]
+    m/s^2), where the loop could fit it: the scatter a load transfer must stand out of; and per
+    rail (``by_rail``: n, min, median, max), since a rail the sliding axles clean (soap, leaves)
+    may add a leading/trailing pattern of its own that a rail hard to clean (oil) does not."""
+    fitted = [
+        r
         for r in results
         if r.get("kind") == "clean" and "load_transfer" in r.get("adhesion_fits", {})
     ]
+    diff = [r["adhesion_fits"]["load_transfer"]["bogie_pitch_kN_per_mps2"]
+            - r["true_bogie_pitch_kN_per_mps2"] for r in fitted]  # fmt: skip
     if not diff:
         return {"n": 0}
     q = np.percentile(diff, [5, 50, 95])
-    return {"n": len(diff), "p5": float(q[0]), "median": float(q[1]), "p95": float(q[2])}
+    by_rail: dict[str, dict[str, float]] = {}
+    for rail in sorted({r["contaminant"] for r in fitted}):
+        d = [x for x, r in zip(diff, fitted, strict=True) if r["contaminant"] == rail]
+        by_rail[rail] = {"n": len(d), "min": float(np.min(d)), "median": float(np.median(d)),
+                         "max": float(np.max(d))}  # fmt: skip
+    return {"n": len(diff), "p5": float(q[0]), "median": float(q[1]), "p95": float(q[2]),
+            "by_rail": by_rail}  # fmt: skip
 
 
 def print_table(summary: dict[str, Any]) -> None:
@@ -590,6 +599,9 @@ def print_table(summary: dict[str, Any]) -> None:
         print(f"clean traces' bogie pitch, fitted less the generator's (kN per m/s^2, "
               f"{pitch['n']} fitted): median {pitch['median']:+.1f}, 5-95 % "
               f"{pitch['p5']:+.1f} .. {pitch['p95']:+.1f}")  # fmt: skip
+        print("    by rail: " + "; ".join(
+            f"{rail} {v['n']}: {v['min']:+.1f} .. {v['max']:+.1f} (median {v['median']:+.1f})"
+            for rail, v in pitch.get("by_rail", {}).items()))  # fmt: skip
     print(f"{'category':24s} {'magnitude':>10s} {'n':>4s} {'detect':>7s} {'or alt':>7s} "
           f"{'alone':>6s} {'param err':>9s} {'cut':>6s} {'extra':>6s}")  # fmt: skip
     for cat, info in summary["categories"].items():

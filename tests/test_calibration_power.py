@@ -64,6 +64,27 @@ def test_a_threshold_on_the_fitted_pitch_keeps_the_clean_traces_false_positives(
     assert cp.pitch_threshold(clean + rows([29.0]), effect)["detection"] == 0.25
 
 
+def test_the_clean_traces_pitch_readings_per_rail():
+    """``clean_pitch_readings``: the fitted pitch less the generator's on clean traces where one
+    was fitted (other kinds and unfitted traces left out), overall and per rail."""
+    cp = script("calibration_power")
+
+    def row(rail, fitted, true=2.0, kind="clean"):
+        fits = {} if fitted is None else {"load_transfer": {"bogie_pitch_kN_per_mps2": fitted}}
+        return {"kind": kind, "contaminant": rail, "adhesion_fits": fits,
+                "true_bogie_pitch_kN_per_mps2": true}  # fmt: skip
+
+    rows = [row("soap", -20.0), row("soap", 4.0), row("soap", 2.0), row("oil", 1.0),
+            row("oil", None), row("soap", 50.0, kind="clean_demand_drop")]  # fmt: skip
+    out = cp.clean_pitch_readings(rows)
+    assert out["n"] == 4 and out["median"] == -0.5
+    assert out["by_rail"] == {
+        "oil": {"n": 1, "min": -1.0, "median": -1.0, "max": -1.0},
+        "soap": {"n": 3, "min": -22.0, "median": 0.0, "max": 2.0},
+    }
+    assert cp.clean_pitch_readings([row("oil", None)]) == {"n": 0}
+
+
 def test_the_power_study_says_what_a_friction_step_leaves_to_see(tmp_path):
     """A friction change along the rail: the generator's seconds past the curve's peak on
     each side of it and the loop's critical points there, per trace and summarised."""
