@@ -35,7 +35,6 @@ from pathlib import Path
 import numpy as np
 import yaml
 from _results_md import fenced, tee_stdout, write_results
-from scipy.integrate import cumulative_trapezoid
 from scipy.signal import savgol_filter
 
 from wsp_env.calibration.adhesion_estimate import estimate_adhesion, fit_polach
@@ -223,7 +222,7 @@ def closed_loop(directory: Path) -> None:
             cli_main(["calibrate", str(csv_path), "--export", str(rails)])
         options = yaml.safe_load(rails.with_name("loop.yaml.options.yaml").read_text())
         trace = read_trace(csv_path)
-        run_m = cumulative_trapezoid(trace.v_train_kmh / 3.6, trace.time_s, initial=0.0)
+        run_m = trace.distance_m()
         measured = run_m[-1] - float(np.interp(3.0, trace.time_s, run_m))
         run, _ = run_one(
             "uic_z1", "calibrated", float(trace.v_train_kmh[0]), make_policy("classical"), 0,

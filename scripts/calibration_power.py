@@ -302,14 +302,12 @@ def _step_evidence(ind: Any, scenario: Any, effects: list[Any], step: Any, seed:
     ``independent.sliding_around``), and the loop's critical points at a slide (sliding by
     ``SLIDE_POINT_KMH`` or more: the points that bear on the rail's level, not the creep curve's
     initial slope), placed by the train's distance run since the brake application."""
-    from scipy.integrate import cumulative_trapezoid
-
     from wsp_env.calibration.adhesion_estimate import pooled_points
     from wsp_env.calibration.residuals import MIN_SPEED_KMH
 
     position = float(step.params["position_m"])
     before_s, after_s = ind.sliding_around(scenario, effects, position, seed=seed)
-    run_m = cumulative_trapezoid(trace.v_train_kmh / 3.6, trace.time_s, initial=0.0)
+    run_m = trace.distance_m()
     x_brake = float(np.interp(scenario.lead_in_s, trace.time_s, run_m))
     pts = pooled_points(trace, MIN_SPEED_KMH)
     at_slide = pts.sliding_kmh >= SLIDE_POINT_KMH

@@ -206,6 +206,10 @@ def _mutations():
         m["vehicle"]["axle_offsets_m"] = "0, 2.5, 19, 21.5"
         return h, rows, m
 
+    def offsets_shared_place(h, rows, m):  # all zeros would read as unknown places
+        m["vehicle"]["axle_offsets_m"] = [0.0, 0.0, 0.0, 0.0]
+        return h, rows, m
+
     def offsets_in_mm(h, rows, m):
         m["vehicle"]["axle_offsets_m"] = [0.0, 2500.0, 19000.0, 21500.0]
         return h, rows, m
@@ -220,6 +224,7 @@ def _mutations():
         (offsets_text, "vehicle.axle_offsets_m: must list one number per axle (got str)"),
         (offsets_not_from_axle_1, "vehicle.axle_offsets_m: axle 1's must be 0"),
         (offsets_out_of_order, "vehicle.axle_offsets_m: axle 3 (1 m) is ahead of axle 2"),
+        (offsets_shared_place, "vehicle.axle_offsets_m: axle 2 at the place of axle 1 (0 m)"),
         (offsets_in_mm, "vehicle.axle_offsets_m: the last axle 21500 m behind the first"),
         (time_back, "'time_s': not strictly increasing"),
         (long_gap, "'v_train_kmh': 6 missing samples in a row"),

@@ -49,7 +49,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy.integrate import cumulative_trapezoid
 from scipy.optimize import least_squares
 from scipy.signal import bilinear, lfilter, savgol_filter
 
@@ -204,7 +203,7 @@ def estimate_adhesion(trace: Trace, min_speed_kmh: float = 20.0) -> list[Critica
     v = trace.v_train_kmh / 3.6
     decel = train_deceleration(trace)
     normal = normal_loads(trace, decel)
-    x_m = cumulative_trapezoid(v, t, initial=0.0)
+    x_m = trace.distance_m()
     sigma_v = max(noise_std(trace.v_train_kmh), SPEED_RESOLUTION_KMH) / 3.6
     sigma_p = noise_std(trace.p_cyl_bar)
     out = []
@@ -306,7 +305,7 @@ def censored_points(trace: Trace, min_speed_kmh: float = 20.0) -> CensoredPoints
     v_kmh = trace.v_train_kmh
     decel = train_deceleration(trace)
     normal = normal_loads(trace, decel)
-    x_m = cumulative_trapezoid(v_kmh / 3.6, t, initial=0.0)
+    x_m = trace.distance_m()
     sigma_p = noise_std(trace.p_cyl_bar)
     parts = []
     for i in range(trace.n_axles):

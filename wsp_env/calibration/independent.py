@@ -1179,7 +1179,7 @@ def _metadata(sc: Scenario, sim: dict[str, Any]) -> dict:
         if sc.pivot_in_metadata:
             veh["bogie_pivot_height_m"] = round(sc.bogie_pivot_height_m, 3)
         if sc.offsets_in_metadata:
-            veh["axle_offsets_m"] = [round(float(x), 3) for x in _vehicle(sc)["offset"]]
+            veh["axle_offsets_m"] = [round(float(x), 3) for x in sim["offset"]]
         if sc.transfer_list_in_metadata:
             k_nom = _vehicle(sc)["k"]
             veh["axle_load_transfer_kN_per_mps2"] = [round(float(x) / 1000, 3) for x in k_nom]

@@ -56,7 +56,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.integrate import cumulative_trapezoid
 
 from wsp_env.calibration.adhesion_estimate import CensoredPoints, CriticalPoints
 from wsp_env.calibration.adhesion_model import (
@@ -185,8 +184,7 @@ def rail_gets_better(
         return None
     episodes, p_onset, p_after = r.episodes, r.onset_bar, r.after_bar
     offsets = axle_offsets_m(trace)
-    # the distance run, as the critical points and bounds place themselves
-    run_m = cumulative_trapezoid(trace.v_train_kmh / 3.6, trace.time_s, initial=0.0)
+    run_m = trace.distance_m()  # as the critical points and bounds place themselves
     position, axle = stop_position_m(episodes, run_m, offsets)
     at_limit = slides_at_limit(trace, points) if len(points) else np.zeros(0, dtype=bool)
     mu = points.mu[at_limit] if at_limit.any() else np.zeros(0)

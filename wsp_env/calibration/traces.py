@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 import scipy.sparse as sparse
+from scipy.integrate import cumulative_trapezoid
 from scipy.sparse.linalg import spsolve
 
 from wsp_env.core.records import CONTAMINANTS, FORMAT
@@ -92,6 +93,11 @@ class Trace:
     @property
     def vehicle(self) -> dict[str, Any]:
         return self.meta["vehicle"]
+
+    def distance_m(self) -> np.ndarray:
+        """(T,) the distance the train has run (m), the ground speed integrated from the first
+        sample (trapezoidal): where critical points, censored bounds and slides sit on the rail."""
+        return cumulative_trapezoid(self.v_train_kmh / 3.6, self.time_s, initial=0.0)
 
     def axle_torque_gains(self) -> np.ndarray:
         """Nominal brake torque gain (N m / bar) per axle: ``brake.axle_torque_gain_Nm_per_bar``
@@ -270,7 +276,8 @@ MAX_TRAIN_LENGTH_M = 1000.0
 
 def _check_axle_offsets(meta_path: Path, veh: dict[str, Any]) -> None:
     """One line where the optional ``vehicle.axle_offsets_m`` is not each axle's distance behind
-    axle 1 in running order: one number per axle, the first 0, never falling, within
+    axle 1 in running order: one number per axle, the first 0, each behind the one before
+    (all zeros would read as unknown places, ``adhesion_model.axle_offsets_m``), within
     ``MAX_TRAIN_LENGTH_M``."""
     off = veh.get("axle_offsets_m")
     if off is None:
@@ -286,6 +293,9 @@ def _check_axle_offsets(meta_path: Path, veh: dict[str, Any]) -> None:
         if off[i] < off[i - 1]:
             raise _fail(meta_path, f"{field}: axle {i + 1} ({off[i]:g} m) is ahead of axle {i} "
                         f"({off[i - 1]:g} m): list the axles in running order")  # fmt: skip
+        if off[i] == off[i - 1]:  # two wheelsets cannot share a place (and all-zero reads as
+            raise _fail(meta_path, f"{field}: axle {i + 1} at the place of axle {i} "
+                        f"({off[i]:g} m)")  # fmt: skip
     if off[-1] > MAX_TRAIN_LENGTH_M:
         raise _fail(meta_path, f"{field}: the last axle {off[-1]:g} m behind the first: more "
                     f"than a {MAX_TRAIN_LENGTH_M:g} m train (metres?)")  # fmt: skip
