@@ -261,13 +261,19 @@ class SB3Policy:
             else:
                 self._episode_start[rows] = False
         else:
-            action = np.concatenate(
-                [
-                    self.model.predict(x[b : b + INFERENCE_BLOCK], deterministic=True)[0]
-                    for b in blocks
-                ]
-            )[:n]
+            action = self._forward(x)[:n]
         return np.asarray(action, dtype=np.float64 if self._discrete else np.float32)
+
+    def _forward(self, x: np.ndarray) -> np.ndarray:
+        """A feed-forward model's deterministic actions for every row of ``x`` (normalised,
+        stacked, padded to a multiple of ``INFERENCE_BLOCK``; a subclass may run other weights
+        per row: ``training.es.PopulationPolicy``)."""
+        return np.concatenate(
+            [
+                self.model.predict(x[b : b + INFERENCE_BLOCK], deterministic=True)[0]
+                for b in range(0, x.shape[0], INFERENCE_BLOCK)
+            ]
+        )
 
 
 # the environment settings a trained model needs in evaluation (its spaces and timing)

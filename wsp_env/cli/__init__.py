@@ -699,6 +699,73 @@ def cmd_train(args: argparse.Namespace) -> dict[str, Any]:
     )  # fmt: skip
 
 
+def _add_finetune(sub: argparse._SubParsersAction) -> None:
+    from wsp_env.training.es import ESSettings
+
+    d = ESSettings(start="")
+    p = sub.add_parser(
+        "finetune",
+        help="fine-tune a trained policy on the benchmark's own score (evolution strategies)",
+        description="Evolution strategies on the actor's last layers: antithetic perturbations "
+        "run the same training stops (never sealed or development ones), each scored as the "
+        "benchmark scores; --resume continues bit for bit. See docs/training.md.",
+    )
+    p.add_argument("start", nargs="?", default=None, help="the model file to start from")
+    p.add_argument("--out", default=None, help="run folder (default: --resume's)")
+    p.add_argument("--resume", default=None, help="continue the fine-tune in this folder")
+    p.add_argument("--generations", type=int, required=True, help="generations to run now")
+    for flag, kind, what in (
+        ("--pairs", int, "antithetic pairs a generation"),
+        ("--stops", int, "training stops a generation"),
+        ("--pool", int, "training stops to draw from"),
+        ("--sigma", _positive, "perturbation scale"),
+        ("--learning-rate", _positive, "Adam's step"),
+        ("--layers", int, "the actor's last layers that move"),
+        ("--seed", _seed, "the draws' seed"),
+    ):
+        name = flag[2:].replace("-", "_")
+        p.add_argument(flag, type=kind, default=None,
+                       help=f"{what} (default {getattr(d, name)})")  # fmt: skip
+    p.add_argument("--no-progress", action="store_true", help="no line per generation")
+    p.add_argument("--json", dest="json_path", default=None, help="write the result here")
+    p.set_defaults(func=cmd_finetune)
+
+
+FINETUNE_SETTINGS = ("pairs", "stops", "pool", "sigma", "learning_rate", "layers", "seed")
+
+
+def cmd_finetune(args: argparse.Namespace) -> dict[str, Any]:
+    from wsp_env.training.es import ESSettings, finetune
+
+    if args.generations < 0:
+        raise UserError("--generations: must be >= 0")
+    given = {k: getattr(args, k) for k in FINETUNE_SETTINGS if getattr(args, k) is not None}
+    if args.resume is not None:
+        if args.start is not None:
+            raise UserError("start: a resumed fine-tune keeps its own start (drop it)")
+        if args.out is not None and Path(args.out) != Path(args.resume):
+            raise UserError("--out: a resumed fine-tune writes to its own folder (drop --out)")
+        if given:
+            flag = "--" + next(iter(given)).replace("_", "-")
+            raise UserError(f"{flag}: a resumed fine-tune keeps its own settings (drop it)")
+        out, settings = args.resume, None
+    else:
+        if args.start is None:
+            raise UserError("start: the model file to fine-tune is required unless --resume")
+        if args.out is None:
+            raise UserError("--out: required")
+        out = args.out
+        settings = ESSettings(start=args.start, **given)
+
+    def progress(line: str) -> None:
+        print(line, file=sys.stderr, flush=True)
+
+    return finetune(
+        args.start, out, args.generations, settings, resume=args.resume is not None,
+        progress=None if args.no_progress else progress,
+    )  # fmt: skip
+
+
 # ---- validate -------------------------------------------------------------------------------
 
 
@@ -883,6 +950,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_calibrate(sub)
     _add_bench(sub)
     _add_train(sub)
+    _add_finetune(sub)
     _add_sweep(sub)
     _add_validate(sub)
     _add_export(sub)
@@ -894,7 +962,7 @@ def build_parser() -> argparse.ArgumentParser:
 # the commands that step the physics, and what a first run of one says while numba compiles
 # (measured: docs/physics.md, "First run")
 COMPILING = ("simulate", "evaluate", "benchmark", "train", "validate", "rig", "traction",
-             "bench", "sweep")  # fmt: skip
+             "bench", "sweep", "finetune")  # fmt: skip
 COMPILE_NOTICE = (
     "wsp-env: compiling the physics kernels (once per install and version; 10-20 s on 2 cores) ..."
 )

@@ -108,6 +108,20 @@ def print_train(result: dict[str, Any]) -> None:
     print(f"  wrote {result['model_path']}")
 
 
+def print_finetune(result: dict[str, Any]) -> None:
+    last = result.get("last")
+    print(
+        f"evolution strategies: {result['generations']} generations, {result['wall_time_s']:.0f} s "
+        f"({result['wall_time_s_this_call']:.0f} s this call), {result['parameters']} parameters"
+    )
+    if last is not None:
+        print(
+            f"last generation: score {last['score_current']:.4f} against the start's "
+            f"{last['score_start']:.4f} on its {result['settings']['stops']} training stops"
+        )
+    print(f"  wrote {result['model_path']}")
+
+
 def print_validate(result: dict[str, Any]) -> None:
     s2, s0, dry = result["seed002"], result["seed000"], result["dry_quiet"]
     slides = ", ".join(f"{x:.1f}" for x in s2["mean_sliding_kmh"])
@@ -227,6 +241,7 @@ PRINTERS = {
     "calibrate": print_calibrate,
     "bench": print_bench,
     "train": print_train,
+    "finetune": print_finetune,
     "validate": print_validate,
     "export-policy": print_export,
     "rig": print_rig,

@@ -1,0 +1,158 @@
+"""Evolution-strategies fine-tuning (``wsp_env.training.es``, ``wsp-env finetune``): a member
+holding some weights acts exactly as a model file holding them; no generation moves nothing
+(the start's own actions come back); a run resumed between generations ends where the run in
+one go ends; the pool's stops are no benchmark or suite stop; bad settings are one line."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from test_train import train_config
+
+from wsp_env.cli import main
+from wsp_env.core.config import configs_root
+from wsp_env.evaluation.benchmark import POLICY_KEYS, sealed_seeds
+from wsp_env.evaluation.runner import run_runs
+from wsp_env.evaluation.suites import load_suite
+from wsp_env.policy import SB3Policy
+
+es = pytest.importorskip("wsp_env.training.es")
+pytest.importorskip("stable_baselines3")
+
+SEEDS = [es.TRAINING_SEED_BASE + i for i in (0, 3, 6)]
+
+
+@pytest.fixture(autouse=True)
+def short_stops(monkeypatch):
+    """The pool's stops cut at 8 s (the benchmark's limit is 600 s): what is compared here is
+    the same either way, and an untrained model's stops are long."""
+    setup = es.env_setup
+
+    def capped(start):
+        veh, kwargs, _, tier = setup(start)
+        return veh, kwargs, 8.0, tier
+
+    monkeypatch.setattr(es, "env_setup", capped)
+
+
+@pytest.fixture(scope="module")
+def start(tmp_path_factory):
+    """A tiny trained slip-target model (frame stack, normalisation, an action repeat)."""
+    tmp = tmp_path_factory.mktemp("es")
+    env_kwargs = {"vehicle": "uic_z1", "action_mode": "slip_target", "memory_features": True,
+                  "action_repeat": 2, "scenario": {"speed_kmh": [30, 40]}}  # fmt: skip
+    path = train_config(tmp, n_timesteps=256, env_kwargs=env_kwargs, frame_stack=2)
+    assert main(["train", "--config", str(path), "--out", str(tmp / "run"), "--no-progress"]) == 0
+    return tmp / "run" / "model.zip"
+
+
+def _returns(policy, start, seeds):
+    veh, kwargs, max_time_s, _ = es.env_setup(start)
+    res, _ = run_runs(veh, es.training_runs(veh, seeds), policy, max_time_s=max_time_s,
+                      env_kwargs=kwargs, policy_keys=POLICY_KEYS)  # fmt: skip
+    return np.array([r["return"] for r in res])
+
+
+def test_a_member_acts_as_the_model_file_holding_its_weights_bit_for_bit(start, tmp_path):
+    layers, _ = es.actor_layers(SB3Policy(start).model)
+    theta0 = es.get_parameters(layers[-1:])
+    theta1 = theta0 + 0.05 * np.random.default_rng(0).standard_normal(theta0.size)
+    both = es.evaluate_population(start, np.stack([theta0, theta1]), SEEDS, 1)
+    assert np.array_equal(both[0], _returns(SB3Policy(start), start, SEEDS))
+    moved = es.write_model(start, tmp_path / "model.zip", theta1, 1, _meta(start))
+    assert np.array_equal(both[1], _returns(SB3Policy(moved), start, SEEDS))
+    assert not np.array_equal(both[0], both[1])  # the perturbation reaches the returns
+    # two moving layers: the same weights in a member and in a file
+    theta2 = es.get_parameters(layers[-2:])
+    theta2 = theta2 + 0.05 * np.random.default_rng(1).standard_normal(theta2.size)
+    pair = es.evaluate_population(start, np.stack([theta2, theta2]), SEEDS[:2], 2)
+    (tmp_path / "two").mkdir()
+    moved = es.write_model(start, tmp_path / "two" / "model.zip", theta2, 2, _meta(start))
+    assert np.array_equal(pair[0], pair[1])
+    assert np.array_equal(pair[0], _returns(SB3Policy(moved), start, SEEDS[:2]))
+
+
+def _meta(start):
+    from wsp_env.policy import model_metadata
+
+    return model_metadata(start)
+
+
+def _finetune(start, out, generations, resume=False):
+    settings = es.ESSettings(start=str(start), pairs=1, stops=2, pool=4, sigma=0.05,
+                             learning_rate=0.01, seed=5)  # fmt: skip
+    return es.finetune(start, out, generations, None if resume else settings, resume=resume)
+
+
+def test_resumed_fine_tune_ends_where_one_go_ends_and_zero_generations_keep_the_start(
+    start, tmp_path
+):
+    one = _finetune(start, tmp_path / "one", 2)
+    _finetune(start, tmp_path / "two", 1)
+    two = _finetune(None, tmp_path / "two", 1, resume=True)
+    a, b = np.load(tmp_path / "one" / es.STATE), np.load(tmp_path / "two" / es.STATE)
+    assert np.array_equal(a["theta"], b["theta"]) and int(b["generation"]) == 2
+    assert one["generations"] == two["generations"] == 2 and one["distance_from_start"] > 0
+    hist = json.loads((tmp_path / "one" / es.HISTORY).read_text())
+    other = json.loads((tmp_path / "two" / es.HISTORY).read_text())
+    assert [_untimed(r) for r in hist] == [_untimed(r) for r in other]
+    # generation 0 runs the start and the current weights, which are the same
+    assert hist[0]["score_gain"] == 0.0 and hist[0]["stops_better"] == 0.0
+    # the written model is the current weights: it acts as the state's
+    moved = SB3Policy(tmp_path / "one" / "model.zip")
+    layers, _ = es.actor_layers(moved.model)
+    assert np.allclose(es.get_parameters(layers[-1:]), a["theta"], atol=1e-7)
+    assert (tmp_path / "one" / "model.vecnormalize.pkl").exists()
+    # no generation at all: the start itself
+    _finetune(start, tmp_path / "none", 0)
+    same = SB3Policy(tmp_path / "none" / "model.zip")
+    assert np.array_equal(_returns(same, start, SEEDS[:1]), _returns(SB3Policy(start), start,
+                                                                       SEEDS[:1]))  # fmt: skip
+
+
+def _untimed(row):
+    return {k: v for k, v in row.items() if k != "wall_s"}
+
+
+def test_the_pool_shares_no_seed_with_the_benchmark_or_any_suite():
+    pool = set(range(es.TRAINING_SEED_BASE, es.TRAINING_SEED_BASE + es.MAX_POOL))
+    for stop_set in ("sealed", "development"):
+        assert not pool & set(sealed_seeds(stop_set=stop_set))
+    suites = sorted((configs_root() / "scenarios").glob("*.yaml"))
+    assert len(suites) >= 4
+    for path in suites:
+        assert not pool & set(load_suite(path.stem).seeds), path.stem
+
+
+def test_centred_ranks_are_scale_free_and_share_ties():
+    assert es.centred_ranks(np.array([3.0, 1.0, 2.0])).tolist() == [0.5, -0.5, 0.0]
+    assert es.centred_ranks(np.array([1e-9, 1e9, 7.0])).tolist() == [-0.5, 0.5, 0.0]
+    assert es.centred_ranks(np.array([1.0, 1.0, 0.0])).tolist() == [0.25, 0.25, -0.5]
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--generations", "1"], "start: the model file to fine-tune is required"),
+        (["{start}", "--generations", "1"], "--out: required"),
+        (["{start}", "--out", "{out}", "--generations", "1", "--stops", "5", "--pool", "4"],
+         "stops: 5 a generation, more than the pool's 4"),
+        (["{start}", "--out", "{out}", "--generations", "1", "--pairs", "0"],
+         "pairs: must be a whole number >= 1"),
+        (["{start}", "--out", "{out}", "--generations", "1", "--layers", "9"],
+         "layers: 1-3 for this actor, got 9"),
+        (["--resume", "{out}", "--generations", "1"], "no fine-tune to resume"),
+        (["{out}/missing.zip", "--out", "{out}", "--generations", "1"], "no such model file"),
+        (["{start}", "--out", "{out}", "--generations", "-1"], "--generations: must be >= 0"),
+    ],
+)  # fmt: skip
+def test_bad_fine_tune_input_is_one_line_and_writes_nothing(start, tmp_path, capsys, argv,
+                                                             message):  # fmt: skip
+    out = tmp_path / "ft"
+    argv = [a.format(start=start, out=out) for a in argv]
+    assert main(["finetune", *argv]) == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err and len(err.splitlines()) == 1, err
+    assert not out.exists() or not any(out.iterdir())

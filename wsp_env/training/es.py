@@ -1,0 +1,476 @@
+"""Fine-tuning a trained policy on the benchmark's own score with evolution strategies
+(``wsp-env finetune``; docs/training.md, "Fine-tuning on the score").
+
+**Why not PPO here.** PPO from an imitation start moved the slip-target student off its start on
+most stops (docs/training.md, "The fine-tune against its imitation start"): its objective, the
+mean discounted return, is carried by a few stops 10-20 times the median, not the score (the
+interquartile mean of each stop's return normalised between locked wheels and the classical
+WSP); and a better target at one 80 ms decision changes a stop's return by far less than stops
+differ from one another, so its advantage estimates are mostly the stops' spread.
+
+**The method**: OpenAI-ES (Salimans, Ho, Chen, Sidor & Sutskever 2017, "Evolution strategies as a
+scalable alternative to reinforcement learning", arXiv:1703.03864) — a policy gradient with
+exploration in parameter space (Sehnke et al. 2010, "Parameter-exploring policy gradients",
+Neural Networks 23(4)). Per generation:
+
+1. ``stops`` stops are drawn from a pool of training stops of the benchmark's distribution
+   (``TRAINING_SEED_BASE + i``: far from the sealed and development seeds and from every suite;
+   ``tests/test_es.py`` checks), scored ones only (where the classical WSP gains at least
+   ``benchmark.MIN_GAIN``); the pool's locked-wheel and classical returns are computed once;
+2. ``pairs`` antithetic perturbations ``theta +- sigma * eps`` of the actor's last ``layers``
+   linear layers (the action head by default) run those same stops — the same seeds, the same
+   sensor errors (common random numbers: members differ by their weights only) — beside the
+   current weights and the start, all as one batch of environments through the benchmark's own
+   runner (``runner.run_runs``: the tier's sensors, the watchdog, the default reward);
+3. each member's fitness is the benchmark's score on those stops (``benchmark.score``); the
+   perturbations, weighted by their fitnesses' centred ranks, estimate the gradient, and Adam
+   (Kingma & Ba 2015) takes a step.
+
+The start and the current weights run every generation, so ``history.json`` carries the paired
+gain of the current weights over the start on fresh stops (the learning curve). State is saved
+after every generation (``es_state.npz``, ``history.json``): ``--resume`` continues a run stopped
+at any point and ends with the same weights as the run done in one go (each generation's draws
+come from ``(seed, generation)``). The result is an ordinary model file (``model.zip`` with the
+start's normalisation beside it and its metadata inside), scored like any other.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import shutil
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from wsp_env.core.config import load_vehicle
+from wsp_env.envs.tiers import benchmark_env_kwargs
+from wsp_env.evaluation.benchmark import DAMAGE_CRITERIA, MIN_GAIN, POLICY_KEYS, iqm
+from wsp_env.evaluation.runner import run_runs
+from wsp_env.evaluation.suites import Run
+from wsp_env.policy import (
+    INFERENCE_BLOCK,
+    SB3Policy,
+    model_metadata,
+    require_extras,
+    write_model_metadata,
+)
+from wsp_env.threads import applied, thread_policy
+
+TRAINING_SEED_BASE = 9_510_000  # the pool's seeds: TRAINING_SEED_BASE + i, i < MAX_POOL
+MAX_POOL = 100_000
+STATE = "es_state.npz"
+SETTINGS = "es.json"
+POOL = "pool.json"
+HISTORY = "history.json"
+
+
+@dataclass(frozen=True)
+class ESSettings:
+    """A fine-tune's settings (``es.json``; defaults: what the docs' runs used).
+
+    ============================  =======  ==================================================
+    field                         default  meaning
+    ============================  =======  ==================================================
+    ``pairs``                     6        antithetic perturbation pairs a generation
+    ``stops``                     100      stops a generation (every member runs the same)
+    ``pool``                      2000     training stops to draw from
+    ``sigma``                     0.01     perturbation scale, in parameter units
+    ``learning_rate``             0.001    Adam's step, in parameter units
+    ``layers``                    1        the actor's last linear layers that move (1: head)
+    ``seed``                      0        every draw comes from ``(seed, generation)``
+    ============================  =======  ==================================================
+    """
+
+    start: str
+    pairs: int = 6
+    stops: int = 100
+    pool: int = 2000
+    sigma: float = 0.01
+    learning_rate: float = 0.001
+    layers: int = 1
+    seed: int = 0
+
+    def check(self) -> None:
+        """One line naming the first bad field."""
+        for name in ("pairs", "stops", "pool", "layers"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise ValueError(f"{name}: must be a whole number >= 1, got {v!r}")
+        if self.pool > MAX_POOL:
+            raise ValueError(f"pool: at most {MAX_POOL} stops, got {self.pool}")
+        if self.stops > self.pool:
+            raise ValueError(f"stops: {self.stops} a generation, more than the pool's {self.pool}")
+        for name in ("sigma", "learning_rate"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 < v < math.inf:
+                raise ValueError(f"{name}: must be a positive number, got {v!r}")
+        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
+            raise ValueError(f"seed: must be a whole number >= 0, got {self.seed!r}")
+
+
+def actor_layers(model: Any) -> tuple[list[Any], type]:
+    """The actor's linear layers in order (its MLP's, then the action head) and its activation,
+    for a stable-baselines3 ``ActorCriticPolicy`` on flat observations with continuous actions;
+    anything else is refused in one line."""
+    import torch
+
+    policy = model.policy
+    name = type(model).__name__
+    if hasattr(policy, "lstm_actor"):
+        raise ValueError(f"{name}: recurrent policies are not fine-tuned here (feed-forward only)")
+    extractor = getattr(policy, "mlp_extractor", None)
+    if extractor is None or not hasattr(policy, "action_net"):
+        raise ValueError(f"{name}: not an actor-critic policy with an action head")
+    if getattr(policy, "squash_output", False) or getattr(policy, "use_sde", False):
+        raise ValueError(f"{name}: squashed or gSDE actions are not fine-tuned here")
+    if not isinstance(policy.pi_features_extractor, torch.nn.Flatten) and (
+        type(policy.pi_features_extractor).__name__ != "FlattenExtractor"
+    ):
+        raise ValueError(f"{name}: its observations are not flat")
+    act = policy.activation_fn
+    layers = []
+    for m in extractor.policy_net:
+        if isinstance(m, torch.nn.Linear):
+            layers.append(m)
+        elif not isinstance(m, act):
+            raise ValueError(f"{name}: its actor holds a {type(m).__name__} layer")
+    layers.append(policy.action_net)
+    return layers, act
+
+
+def get_parameters(layers: list[Any]) -> np.ndarray:
+    """The layers' weights and biases as one float64 vector (each weight row-major, then its
+    bias)."""
+    parts = []
+    for lin in layers:
+        parts += [lin.weight.detach().cpu().numpy().ravel(), lin.bias.detach().cpu().numpy()]
+    return np.concatenate(parts).astype(np.float64)
+
+
+def set_parameters(layers: list[Any], theta: np.ndarray) -> None:
+    """Write ``theta`` (``get_parameters``' layout) into the layers."""
+    import torch
+
+    i = 0
+    with torch.no_grad():
+        for lin in layers:
+            for p in (lin.weight, lin.bias):
+                k = p.numel()
+                p.copy_(torch.as_tensor(theta[i : i + k].reshape(p.shape), dtype=p.dtype))
+                i += k
+    if i != theta.size:
+        raise ValueError(f"parameters: {theta.size} values for layers holding {i}")
+
+
+class PopulationPolicy(SB3Policy):
+    """A trained model whose last ``n_layers`` actor layers take one set of weights per member:
+    environment ``e`` runs member ``e // rows`` (``rows`` environments each, in order). Everything
+    else — normalisation, frame stack, action repeat, checks — is ``SB3Policy``'s."""
+
+    def __init__(self, path: str | Path, thetas: np.ndarray, rows: int, n_layers: int = 1) -> None:
+        import torch
+
+        super().__init__(path)
+        layers, act = actor_layers(self.model)
+        if not 1 <= n_layers <= len(layers):
+            raise ValueError(f"layers: 1-{len(layers)} for this actor, got {n_layers}")
+        self.name = "es_population"
+        self._rows = int(rows)
+        self._members = int(thetas.shape[0])
+        self._act = act()
+        shared = layers[: len(layers) - n_layers]
+        moving = layers[len(layers) - n_layers :]
+        self._shared = shared
+        self._n_moving = len(moving)
+        self._weights: list[tuple[Any, Any]] = []
+        i = 0
+        for lin in moving:
+            out_f, in_f = lin.weight.shape
+            w = thetas[:, i : i + out_f * in_f].reshape(-1, out_f, in_f)
+            i += out_f * in_f
+            b = thetas[:, i : i + out_f].reshape(-1, 1, out_f)
+            i += out_f
+            self._weights.append(
+                (torch.as_tensor(w, dtype=torch.float32).contiguous(),
+                 torch.as_tensor(b.reshape(-1, out_f), dtype=torch.float32))
+            )  # fmt: skip
+        if i != thetas.shape[1]:
+            raise ValueError(f"parameters: {thetas.shape[1]} a member for layers holding {i}")
+        space = self.model.action_space
+        self._low, self._high = space.low, space.high
+
+    def bind(self, core: Any) -> None:
+        if core.n_envs != self._members * self._rows:
+            raise ValueError(
+                f"{self._members} members x {self._rows} stops, the core has {core.n_envs} "
+                "environments"
+            )
+        super().bind(core)
+
+    def _forward(self, x: np.ndarray) -> np.ndarray:
+        """As ``SB3Policy._forward``, bit for bit where a member holds the model's own weights:
+        every product on blocks of ``INFERENCE_BLOCK`` rows (torch picks its code path by the
+        batch's size), the shared layers on the batch's blocks, each member's on its own rows'."""
+        import torch
+        import torch.nn.functional as F
+
+        block = INFERENCE_BLOCK
+        with torch.no_grad():
+            h = torch.as_tensor(x, dtype=torch.float32)
+            parts = []
+            for b in range(0, h.shape[0], block):
+                hb = h[b : b + block]
+                for lin in self._shared:
+                    hb = self._act(lin(hb))
+                parts.append(hb)
+            h = torch.cat(parts)
+            rows, pad = self._rows, (-self._rows) % block
+            out = []
+            for j in range(self._members):
+                hm = h[j * rows : (j + 1) * rows]
+                if pad:
+                    hm = torch.cat([hm, hm.new_zeros((pad, hm.shape[1]))])
+                for b in range(0, rows + pad, block):
+                    hb = hm[b : b + block]
+                    for k, (w, bias) in enumerate(self._weights):
+                        hb = F.linear(hb, w[j], bias[j])
+                        if k < self._n_moving - 1:
+                            hb = self._act(hb)
+                    out.append(hb[: max(0, min(block, rows - b))])
+            act = torch.cat(out).numpy()
+        act = np.clip(act, self._low, self._high)
+        return np.concatenate([act, np.zeros((x.shape[0] - act.shape[0], act.shape[1]), act.dtype)])
+
+
+def centred_ranks(x: np.ndarray) -> np.ndarray:
+    """Ranks scaled to [-0.5, 0.5] (ties share their mean rank): the fitness shaping of
+    Salimans et al. (2017), invariant to the fitness' scale."""
+    order = np.argsort(x, kind="stable")
+    ranks = np.empty(len(x))
+    ranks[order] = np.arange(len(x), dtype=float)
+    for v in np.unique(x):  # ties: their mean rank
+        tie = x == v
+        ranks[tie] = ranks[tie].mean()
+    return ranks / max(len(x) - 1, 1) - 0.5
+
+
+def env_setup(start: Path) -> tuple[Any, dict[str, Any], float, str]:
+    """The start's vehicle, the benchmark's environment settings for its tier, the time limit
+    and the tier."""
+    meta = model_metadata(start)
+    tier = "wheels+accel" if (meta.get("env_kwargs") or {}).get("accelerometer") else "wheels"
+    kwargs = benchmark_env_kwargs(meta.get("vehicle") or "uic_z1", tier)
+    veh = load_vehicle(kwargs.pop("vehicle"))
+    return veh, kwargs, float(kwargs.pop("max_time_s")), tier
+
+
+def training_runs(veh: Any, seeds: list[int], copies: int = 1) -> list[Run]:
+    """The pool's stops of ``seeds``, ``copies`` times over (one copy a member, in order)."""
+    return [
+        Run(f"train_{s - TRAINING_SEED_BASE:05d}", s, {}, dict(DAMAGE_CRITERIA), veh)
+        for _ in range(copies)
+        for s in seeds
+    ]
+
+
+def _write_json(path: Path, payload: Any) -> None:
+    """Atomically: a temporary file renamed over ``path`` (a stop never leaves half a file)."""
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(payload, indent=1))
+    os.replace(tmp, path)
+
+
+def training_pool(start: Path, n: int, progress: Callable[[str], None] | None = None) -> dict:
+    """The pool's seeds and their locked-wheel and classical returns (the score's ends), for
+    the start's vehicle and sensor tier."""
+    from wsp_env.policy import make_policy
+
+    veh, kwargs, max_time_s, tier = env_setup(start)
+    seeds = [TRAINING_SEED_BASE + i for i in range(n)]
+    runs = training_runs(veh, seeds)
+    out: dict[str, Any] = {"seeds": seeds, "tier": tier, "vehicle": veh.id}
+    for name in ("none", "classical"):
+        if progress is not None:
+            progress(f"pool: {name} on {n} training stops")
+        res, _ = run_runs(veh, runs, make_policy(name, tier=tier), max_time_s=max_time_s,
+                          env_kwargs=kwargs, policy_keys=POLICY_KEYS)  # fmt: skip
+        out[f"r_{name}"] = [r["return"] for r in res]
+    return out
+
+
+def evaluate_population(
+    start: Path, thetas: np.ndarray, seeds: list[int], n_layers: int
+) -> np.ndarray:
+    """Each member's return on each stop, ``(members, stops)``: one batch of environments
+    through the benchmark's runner."""
+    veh, kwargs, max_time_s, _ = env_setup(start)
+    policy = PopulationPolicy(start, thetas, len(seeds), n_layers)
+    res, _ = run_runs(veh, training_runs(veh, seeds, len(thetas)), policy, max_time_s=max_time_s,
+                      env_kwargs=kwargs, policy_keys=POLICY_KEYS)  # fmt: skip
+    return np.array([r["return"] for r in res]).reshape(len(thetas), len(seeds))
+
+
+def finetune(
+    start: str | Path | None,
+    out: str | Path,
+    generations: int,
+    settings: ESSettings | None = None,
+    resume: bool = False,
+    progress: Callable[[str], None] | None = None,
+) -> dict[str, Any]:
+    """Run ``generations`` generations (module docstring) from the model file ``start`` (a new
+    run) or from ``out``'s saved state (``resume``: its own settings), then write ``out/model.zip``
+    with the current weights. Returns ``es.json``'s content.
+
+    Threads: the evaluation's policy (``threads.thread_policy("evaluate")``: the kernel in
+    parallel on every core, torch's forward passes on one thread), for the call only."""
+    require_extras("fine-tuning needs", "rl")
+    with applied(thread_policy("evaluate")):
+        return _finetune(start, out, generations, settings, resume, progress)
+
+
+def _finetune(
+    start: str | Path | None,
+    out: str | Path,
+    generations: int,
+    settings: ESSettings | None,
+    resume: bool,
+    progress: Callable[[str], None] | None,
+) -> dict[str, Any]:
+    out = Path(out)
+    if resume:
+        if not (out / SETTINGS).exists() or not (out / STATE).exists():
+            raise ValueError(f"{out}: no fine-tune to resume ({SETTINGS}, {STATE} missing)")
+        saved = json.loads((out / SETTINGS).read_text())
+        settings = ESSettings(**saved["settings"])
+    else:
+        settings = settings or ESSettings(start=str(start))
+        settings = ESSettings(**{**asdict(settings), "start": str(start)})
+        if (out / STATE).exists():
+            raise ValueError(f"{out}: holds a fine-tune already (--resume it, or a new --out)")
+    settings.check()
+    if isinstance(generations, bool) or not isinstance(generations, int) or generations < 0:
+        raise ValueError(f"generations: must be a whole number >= 0, got {generations!r}")
+    start_path = Path(settings.start)
+    if not start_path.exists():
+        raise FileNotFoundError(f"{start_path}: no such model file")
+    meta = model_metadata(start_path)
+    norm_file = start_path.with_suffix(".vecnormalize.pkl")
+    if meta.get("obs_normalization") and not norm_file.exists():
+        raise ValueError(f"{start_path}: trained on normalised observations, {norm_file} missing")
+    base = SB3Policy(start_path)  # refuses what cannot load
+    layers, _ = actor_layers(base.model)
+    if not 1 <= settings.layers <= len(layers):
+        raise ValueError(f"layers: 1-{len(layers)} for this actor, got {settings.layers}")
+    moving = layers[len(layers) - settings.layers :]
+    theta0 = get_parameters(moving)
+    out.mkdir(parents=True, exist_ok=True)
+
+    if resume:
+        st = np.load(out / STATE)
+        theta, m, v, done = st["theta"], st["m"], st["v"], int(st["generation"])
+        history = json.loads((out / HISTORY).read_text())
+        pool = json.loads((out / POOL).read_text())
+    else:
+        theta, m, v, done = theta0.copy(), np.zeros_like(theta0), np.zeros_like(theta0), 0
+        history = []
+        pool = training_pool(start_path, settings.pool, progress)
+        _write_json(out / POOL, pool)
+        # the settings first, so a run stopped in its first call can be resumed
+        _write_json(out / SETTINGS, {"settings": asdict(settings), "generations": 0})
+    seeds = np.array(pool["seeds"])
+    r_none, r_cls = np.array(pool["r_none"]), np.array(pool["r_classical"])
+    scored = np.flatnonzero(r_cls - r_none >= MIN_GAIN)
+    if scored.size < settings.stops:
+        raise ValueError(
+            f"pool: {scored.size} scored stops, fewer than {settings.stops} a generation"
+        )
+    beta1, beta2, adam_eps = 0.9, 0.999, 1e-8
+    t0 = time.time()
+    for g in range(done, done + generations):
+        tg = time.time()
+        rng = np.random.default_rng([settings.seed, g])
+        pick = np.sort(rng.choice(scored, size=settings.stops, replace=False))
+        eps = rng.standard_normal((settings.pairs, theta.size))
+        thetas = np.concatenate(
+            [theta0[None], theta[None], theta + settings.sigma * eps, theta - settings.sigma * eps]
+        )
+        returns = evaluate_population(start_path, thetas, [int(s) for s in seeds[pick]],
+                                      settings.layers)  # fmt: skip
+        gain = r_cls[pick] - r_none[pick]
+        s = (returns - r_none[pick]) / gain
+        fitness = iqm(s, axis=1)
+        u = centred_ranks(fitness[2:])
+        k = settings.pairs
+        grad = (u[:k] - u[k:]) @ eps / (2 * k * settings.sigma)
+        # Adam, ascending the fitness
+        m = beta1 * m + (1 - beta1) * grad
+        v = beta2 * v + (1 - beta2) * grad * grad
+        step = g + 1
+        m_hat, v_hat = m / (1 - beta1**step), v / (1 - beta2**step)
+        theta = theta + settings.learning_rate * m_hat / (np.sqrt(v_hat) + adam_eps)
+        row = {
+            "generation": g,
+            "score_start": float(fitness[0]),
+            "score_current": float(fitness[1]),
+            "score_gain": float(fitness[1] - fitness[0]),
+            "stops_better": float(np.mean(s[1] > s[0] + 1e-12)),
+            "stops_worse": float(np.mean(s[1] < s[0] - 1e-12)),
+            "mean_return_start": float(returns[0].mean()),
+            "mean_return_current": float(returns[1].mean()),
+            "members_best": float(fitness[2:].max()),
+            "members_worst": float(fitness[2:].min()),
+            "step_norm": float(np.linalg.norm(theta - thetas[1])),
+            "distance_from_start": float(np.linalg.norm(theta - theta0)),
+            "wall_s": round(time.time() - tg, 1),
+        }
+        history.append(row)
+        np.savez(out / (STATE + ".tmp.npz"), theta=theta, m=m, v=v, generation=g + 1)
+        os.replace(out / (STATE + ".tmp.npz"), out / STATE)
+        _write_json(out / HISTORY, history)
+        if progress is not None:
+            progress(
+                f"generation {g}: current {row['score_current']:.4f} vs start "
+                f"{row['score_start']:.4f} ({row['score_gain']:+.4f}), better on "
+                f"{row['stops_better']:.0%}, worse on {row['stops_worse']:.0%}, {row['wall_s']} s"
+            )
+    model_path = write_model(start_path, out / "model.zip", theta, settings.layers, meta)
+    payload = {
+        "settings": asdict(settings),
+        "generations": len(history),
+        "model_path": str(model_path),
+        "start": str(start_path),
+        "tier": pool["tier"],
+        "vehicle": pool["vehicle"],
+        "wall_time_s_this_call": round(time.time() - t0, 1),
+        "wall_time_s": round(sum(r["wall_s"] for r in history), 1),
+        "parameters": int(theta.size),
+        "distance_from_start": float(np.linalg.norm(theta - theta0)),
+        "last": history[-1] if history else None,
+    }
+    _write_json(out / SETTINGS, payload)
+    return payload
+
+
+def write_model(start: Path, path: Path, theta: np.ndarray, n_layers: int,
+                meta: dict[str, Any]) -> Path:  # fmt: skip
+    """The start's model with its last ``n_layers`` actor layers set to ``theta``, saved to
+    ``path`` with the start's metadata (named after ``path``'s folder) and normalisation."""
+    policy = SB3Policy(start)
+    layers, _ = actor_layers(policy.model)
+    set_parameters(layers[len(layers) - n_layers :], theta)
+    tmp = path.with_name(path.stem + ".tmp.zip")
+    policy.model.save(tmp)
+    write_model_metadata(tmp, {**meta, "name": f"{path.parent.name}/{path.stem}",
+                               "finetuned_from": str(start)})  # fmt: skip
+    norm = start.with_suffix(".vecnormalize.pkl")
+    if norm.exists():
+        shutil.copyfile(norm, path.with_suffix(".vecnormalize.pkl"))
+    os.replace(tmp, path)
+    return path
