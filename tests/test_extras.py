@@ -81,6 +81,21 @@ def test_train_without_rl_is_one_line(without, tmp_path, capsys):
     assert not out.exists()
 
 
+def test_finetune_without_rl_is_one_line(without, tmp_path, capsys):
+    from wsp_env.policy import pretrained_dir
+
+    without("torch")
+    out = tmp_path / "ft"
+    start = str(pretrained_dir() / f"{SHIPPED}.zip")
+    assert main(["finetune", start, "--out", str(out), "--generations", "1"]) == 2
+    err = _one_line(capsys)
+    assert err == (
+        "wsp-env finetune: error: fine-tuning needs the rl extra: pip install 'wsp-env[rl]' "
+        "(no module named 'torch')"
+    )
+    assert not out.exists()
+
+
 @pytest.mark.parametrize("hidden", ["onnx", "onnxruntime", "stable_baselines3"])
 def test_export_without_its_extras_is_one_line(without, tmp_path, capsys, hidden):
     without(hidden)
