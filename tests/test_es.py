@@ -156,3 +156,19 @@ def test_bad_fine_tune_input_is_one_line_and_writes_nothing(start, tmp_path, cap
     err = capsys.readouterr().err.strip()
     assert message in err and len(err.splitlines()) == 1, err
     assert not out.exists() or not any(out.iterdir())
+
+
+def test_es_curve_script_draws_a_history_and_refuses_a_missing_one(tmp_path, capsys):
+    from conftest import script
+
+    curve = script("es_curve")
+    assert curve.moving_mean(np.array([1.0, 3.0, 5.0, 7.0]), 2).tolist() == [1.0, 2.0, 4.0, 6.0]
+    run = tmp_path / "ft"
+    run.mkdir()
+    rows = [{"generation": g, "score_gain": 0.001 * g, "stops_better": 0.5} for g in range(4)]
+    (run / "history.json").write_text(json.dumps(rows))
+    assert curve.main([str(run), "--png", str(tmp_path / "c.png")]) == 0
+    assert (tmp_path / "c.png").stat().st_size > 0
+    assert curve.main([str(tmp_path / "nothing"), "--png", str(tmp_path / "d.png")]) == 2
+    assert "nothing/history.json" in capsys.readouterr().err
+    assert not (tmp_path / "d.png").exists()
