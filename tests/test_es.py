@@ -105,6 +105,17 @@ def test_resumed_fine_tune_ends_where_one_go_ends_and_zero_generations_keep_the_
     layers, _ = es.actor_layers(moved.model)
     assert np.allclose(es.get_parameters(layers[-1:]), a["theta"], atol=1e-7)
     assert (tmp_path / "one" / "model.vecnormalize.pkl").exists()
+    # a pool copied into a new run's folder is used as it is, not computed again
+    (tmp_path / "copy").mkdir()
+    (tmp_path / "copy" / es.POOL).write_text((tmp_path / "one" / es.POOL).read_text())
+
+    def no_pool(*args, **kwargs):
+        raise AssertionError("the pool was computed again")
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(es, "training_pool", no_pool)
+        _finetune(start, tmp_path / "copy", 2)
+    assert np.array_equal(np.load(tmp_path / "copy" / es.STATE)["theta"], a["theta"])
     # no generation at all: the start itself
     _finetune(start, tmp_path / "none", 0)
     same = SB3Policy(tmp_path / "none" / "model.zip")

@@ -304,6 +304,23 @@ def training_pool(start: Path, n: int, progress: Callable[[str], None] | None = 
     return out
 
 
+def _saved_pool(path: Path, start: Path, n: int) -> dict | None:
+    """A pool written before into the run folder (a first call stopped before its first
+    generation ended, or a pool copied from another run), if it is this start's vehicle and
+    tier and ``n`` stops; else None."""
+    if not path.exists():
+        return None
+    try:
+        pool = json.loads(path.read_text())
+    except ValueError:
+        return None
+    veh, _, _, tier = env_setup(start)
+    seeds = [TRAINING_SEED_BASE + i for i in range(n)]
+    same = pool.get("tier") == tier and pool.get("vehicle") == veh.id and pool.get("seeds") == seeds
+    ok = same and all(len(pool.get(k) or []) == n for k in ("r_none", "r_classical"))
+    return pool if ok else None
+
+
 def evaluate_population(
     start: Path, thetas: np.ndarray, seeds: list[int], n_layers: int
 ) -> np.ndarray:
@@ -380,8 +397,12 @@ def _finetune(
     else:
         theta, m, v, done = theta0.copy(), np.zeros_like(theta0), np.zeros_like(theta0), 0
         history = []
-        pool = training_pool(start_path, settings.pool, progress)
-        _write_json(out / POOL, pool)
+        pool = _saved_pool(out / POOL, start_path, settings.pool)
+        if pool is None:
+            pool = training_pool(start_path, settings.pool, progress)
+            _write_json(out / POOL, pool)
+        elif progress is not None:
+            progress(f"pool: {settings.pool} training stops from {out / POOL}")
         # the settings first, so a run stopped in its first call can be resumed
         _write_json(out / SETTINGS, {"settings": asdict(settings), "generations": 0})
     seeds = np.array(pool["seeds"])
