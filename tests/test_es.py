@@ -123,6 +123,75 @@ def test_resumed_fine_tune_ends_where_one_go_ends_and_zero_generations_keep_the_
                                                                        SEEDS[:1]))  # fmt: skip
 
 
+def test_population_forward_is_the_models_for_members_over_several_blocks(start):
+    """Members of 64 rows (no padding) and of 100 (two blocks, the last padded), three
+    members: each member holding the model's own weights gives the model's actions."""
+    base = SB3Policy(start)
+    layers, _ = es.actor_layers(base.model)
+    theta = es.get_parameters(layers[-2:])
+    other = theta + 0.1
+    width = base.model.observation_space.shape[0]
+    rng = np.random.default_rng(3)
+    for rows in (64, 100):
+        pop = es.PopulationPolicy(start, np.stack([theta, other, theta]), rows, 2)
+        n = 3 * rows
+        x = rng.normal(size=(n + (-n) % 64, width)).astype(np.float32)
+        got = pop._forward(x)
+        want = base._forward(x)
+        assert got.shape == want.shape
+        assert np.array_equal(got[:rows], want[:rows])
+        assert np.array_equal(got[2 * rows : n], want[2 * rows : n])
+        assert not np.array_equal(got[rows : 2 * rows], want[rows : 2 * rows])
+
+
+def test_a_discrete_start_is_refused():
+    from stable_baselines3 import PPO
+
+    model = PPO("MlpPolicy", "CartPole-v1", device="cpu")
+    with pytest.raises(ValueError, match=r"^PPO: Discrete actions \(continuous only\)$"):
+        es.actor_layers(model)
+
+
+def test_a_fine_tune_stopped_in_its_first_generation_resumes_and_damage_is_one_line(
+    start, tmp_path
+):
+    _finetune(start, tmp_path / "whole", 1)
+    _finetune(start, tmp_path / "cut", 0)  # the pool, the settings and the start's weights
+    assert not (tmp_path / "cut" / es.STATE).exists()
+    _finetune(None, tmp_path / "cut", 1, resume=True)
+    whole = np.load(tmp_path / "whole" / es.STATE)["theta"]
+    assert np.array_equal(np.load(tmp_path / "cut" / es.STATE)["theta"], whole)
+    # a history one row ahead of the state (a stop between the two writes) is cut back
+    hist = json.loads((tmp_path / "cut" / es.HISTORY).read_text())
+    (tmp_path / "cut" / es.HISTORY).write_text(json.dumps(hist + hist))
+    two = _finetune(None, tmp_path / "cut", 1, resume=True)
+    assert two["generations"] == 2
+    # damaged files: one line naming the file
+    (tmp_path / "cut" / es.STATE).write_bytes(b"not a state")
+    with pytest.raises(ValueError, match=r"es_state\.npz: not the fine-tune's state"):
+        _finetune(None, tmp_path / "cut", 1, resume=True)
+    (tmp_path / "cut" / es.POOL).write_text("[1, 2]")
+    with pytest.raises(ValueError, match=r"pool\.json: not this fine-tune's pool"):
+        _finetune(None, tmp_path / "cut", 1, resume=True)
+    (tmp_path / "whole" / es.SETTINGS).write_text("{")
+    with pytest.raises(ValueError, match=r"es\.json: not the fine-tune's settings"):
+        _finetune(None, tmp_path / "whole", 1, resume=True)
+    # a start that changed since the fine-tune began
+    import shutil
+
+    moved = tmp_path / "start" / "model.zip"
+    moved.parent.mkdir()
+    shutil.copyfile(start, moved)
+    shutil.copyfile(start.with_suffix(".vecnormalize.pkl"), moved.with_suffix(".vecnormalize.pkl"))
+    _finetune(moved, tmp_path / "pinned", 0)
+    moved.write_bytes(moved.read_bytes() + b"\0")
+    with pytest.raises(ValueError, match=r"model\.zip: changed since the fine-tune began"):
+        _finetune(None, tmp_path / "pinned", 1, resume=True)
+    # the start's own folder would be overwritten
+    with pytest.raises(ValueError, match=r"the start's own folder and name"):
+        _finetune(start, start.parent, 0)
+
+
 def _untimed(row):
     return {k: v for k, v in row.items() if k != "wall_s"}
 
@@ -156,6 +225,7 @@ def test_centred_ranks_are_scale_free_and_share_ties():
          "layers: 1-3 for this actor, got 9"),
         (["--resume", "{out}", "--generations", "1"], "no fine-tune to resume"),
         (["{out}/missing.zip", "--out", "{out}", "--generations", "1"], "no such model file"),
+        (["{start}", "--out", "{start}", "--generations", "1"], "a file, not a run folder"),
         (["{start}", "--out", "{out}", "--generations", "-1"], "--generations: must be >= 0"),
     ],
 )  # fmt: skip

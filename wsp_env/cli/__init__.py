@@ -995,7 +995,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"wsp-env {args.command}: error: {message}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:  # Ctrl-C: the outputs were removed on the way out (Outputs)
-        print(f"wsp-env {args.command}: interrupted; nothing written", file=sys.stderr)
+        said = "nothing written"
+        if args.command == "finetune":  # its run folder keeps every generation done
+            said = f"the generations done are in {args.resume or args.out} (--resume it)"
+        print(f"wsp-env {args.command}: interrupted; {said}", file=sys.stderr)
         return 130
     try:
         PRINTERS[args.command](result)

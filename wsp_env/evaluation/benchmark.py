@@ -208,6 +208,27 @@ def _summary(
     return out
 
 
+def check_policy(policy: Any, vehicle: str, tier: str, control_period_s: float) -> None:
+    """Refuse, in one line naming it, a policy the benchmark of ``vehicle`` in ``tier`` cannot
+    score as it scores the others: another tier's sensors, privileged observations, another
+    control period, another vehicle."""
+    from wsp_env.policy import check_sensor_tier
+
+    check_sensor_tier(policy, tier)
+    own = getattr(policy, "env_kwargs", None) or {}
+    if own.get("privileged"):
+        raise ValueError(f"policy {policy.name}: observes privileged state; the benchmark does not")
+    period = own.get("control_period_s", control_period_s)
+    if period != control_period_s:
+        raise ValueError(
+            f"policy {policy.name}: runs at a {period} s control period; the benchmark's is "
+            f"{control_period_s} s"
+        )
+    other = getattr(policy, "vehicle", None)
+    if isinstance(other, str) and other != vehicle:
+        raise ValueError(f"policy {policy.name}: trained for vehicle {other!r}, not {vehicle!r}")
+
+
 def run_benchmark(
     policies: list[Any],
     vehicle: str = "uic_z1",
@@ -228,7 +249,7 @@ def run_benchmark(
     accelerometer) is refused: one line naming it."""
     from wsp_env.baselines.classical import ClassicalWSP
     from wsp_env.baselines.oracle import Oracle
-    from wsp_env.policy import NoWSP, check_sensor_tier, make_policy
+    from wsp_env.policy import NoWSP, make_policy
 
     check_tier(tier)
     kwargs = benchmark_env_kwargs(vehicle, tier)
@@ -237,19 +258,7 @@ def run_benchmark(
     max_time_s = kwargs.pop("max_time_s")
     builtin = {"none": NoWSP, "classical": ClassicalWSP, "oracle": Oracle}
     for p in policies:
-        check_sensor_tier(p, tier)
-        own = getattr(p, "env_kwargs", None) or {}
-        if own.get("privileged"):
-            raise ValueError(f"policy {p.name}: observes privileged state; the benchmark does not")
-        period = own.get("control_period_s", kwargs["control_period_s"])
-        if period != kwargs["control_period_s"]:
-            raise ValueError(
-                f"policy {p.name}: runs at a {period} s control period; the benchmark's is "
-                f"{kwargs['control_period_s']} s"
-            )
-        other = getattr(p, "vehicle", None)
-        if isinstance(other, str) and other != veh.id:
-            raise ValueError(f"policy {p.name}: trained for vehicle {other!r}, not {veh.id!r}")
+        check_policy(p, veh.id, tier, kwargs["control_period_s"])
         if p.name in RESERVED and not isinstance(p, builtin[p.name]):
             raise ValueError(f"policy {p.name}: the name is reserved for the built-in {p.name}")
     names = [p.name for p in policies]

@@ -50,7 +50,13 @@ import numpy as np
 
 from wsp_env.core.config import load_vehicle
 from wsp_env.envs.tiers import benchmark_env_kwargs
-from wsp_env.evaluation.benchmark import DAMAGE_CRITERIA, MIN_GAIN, POLICY_KEYS, iqm
+from wsp_env.evaluation.benchmark import (
+    DAMAGE_CRITERIA,
+    MIN_GAIN,
+    POLICY_KEYS,
+    check_policy,
+    iqm,
+)
 from wsp_env.evaluation.runner import run_runs
 from wsp_env.evaluation.suites import Run
 from wsp_env.policy import (
@@ -72,7 +78,8 @@ HISTORY = "history.json"
 
 @dataclass(frozen=True)
 class ESSettings:
-    """A fine-tune's settings (``es.json``; defaults: what the docs' runs used).
+    """A fine-tune's settings (``es.json``; the run in docs/training.md changed only
+    ``learning_rate``, to 0.003).
 
     ============================  =======  ==================================================
     field                         default  meaning
@@ -133,6 +140,10 @@ def actor_layers(model: Any) -> tuple[list[Any], type]:
         type(policy.pi_features_extractor).__name__ != "FlattenExtractor"
     ):
         raise ValueError(f"{name}: its observations are not flat")
+    from gymnasium import spaces
+
+    if not isinstance(model.action_space, spaces.Box):
+        raise ValueError(f"{name}: {type(model.action_space).__name__} actions (continuous only)")
     act = policy.activation_fn
     layers = []
     for m in extractor.policy_net:
@@ -304,21 +315,56 @@ def training_pool(start: Path, n: int, progress: Callable[[str], None] | None = 
     return out
 
 
-def _saved_pool(path: Path, start: Path, n: int) -> dict | None:
-    """A pool written before into the run folder (a first call stopped before its first
-    generation ended, or a pool copied from another run), if it is this start's vehicle and
-    tier and ``n`` stops; else None."""
+def _read_pool(path: Path, start: Path, n: int) -> dict | None:
+    """The pool in ``path`` if it is this start's vehicle and tier and ``n`` stops (a first call
+    stopped before its first generation ended, a pool copied from another run), else None."""
     if not path.exists():
         return None
-    try:
-        pool = json.loads(path.read_text())
-    except ValueError:
-        return None
+    pool = _read_json(path, "pool")
     veh, _, _, tier = env_setup(start)
     seeds = [TRAINING_SEED_BASE + i for i in range(n)]
+    if not isinstance(pool, dict):
+        return None
     same = pool.get("tier") == tier and pool.get("vehicle") == veh.id and pool.get("seeds") == seeds
-    ok = same and all(len(pool.get(k) or []) == n for k in ("r_none", "r_classical"))
-    return pool if ok else None
+    ends = [pool.get(k) for k in ("r_none", "r_classical")]
+    ok = all(isinstance(e, list) and len(e) == n for e in ends)
+    if ok:
+        ok = all(isinstance(x, (int, float)) and math.isfinite(x) for e in ends for x in e)
+    return pool if same and ok else None
+
+
+def _read_json(path: Path, what: str) -> Any:
+    """``path``'s JSON, or one line naming the file."""
+    try:
+        return json.loads(path.read_text())
+    except FileNotFoundError:
+        raise ValueError(f"{path}: missing (the fine-tune's {what})") from None
+    except (OSError, ValueError) as err:
+        raise ValueError(f"{path}: not the fine-tune's {what} ({type(err).__name__})") from None
+
+
+def _read_state(path: Path, size: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """The saved weights, Adam's moments and the generations done, or one line naming the
+    file."""
+    try:
+        with np.load(path) as st:
+            theta, m, v, done = st["theta"], st["m"], st["v"], int(st["generation"])
+    except Exception as err:  # a damaged file: numpy, zipfile and pickle each raise their own
+        raise ValueError(f"{path}: not the fine-tune's state ({type(err).__name__})") from None
+    if not (theta.shape == m.shape == v.shape == (size,)) or done < 0:
+        raise ValueError(f"{path}: holds {theta.size} parameters, the start's layers {size}")
+    return theta, m, v, done
+
+
+def file_sha256(path: Path) -> str:
+    """The file's SHA-256 (a fine-tune pins its start with it)."""
+    import hashlib
+
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
 
 
 def evaluate_population(
@@ -360,23 +406,38 @@ def _finetune(
     resume: bool,
     progress: Callable[[str], None] | None,
 ) -> dict[str, Any]:
-    out = Path(out)
-    if resume:
-        if not (out / SETTINGS).exists() or not (out / STATE).exists():
-            raise ValueError(f"{out}: no fine-tune to resume ({SETTINGS}, {STATE} missing)")
-        saved = json.loads((out / SETTINGS).read_text())
-        settings = ESSettings(**saved["settings"])
-    else:
-        settings = settings or ESSettings(start=str(start))
-        settings = ESSettings(**{**asdict(settings), "start": str(start)})
-        if (out / STATE).exists():
-            raise ValueError(f"{out}: holds a fine-tune already (--resume it, or a new --out)")
-    settings.check()
     if isinstance(generations, bool) or not isinstance(generations, int) or generations < 0:
         raise ValueError(f"generations: must be a whole number >= 0, got {generations!r}")
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"{out}: a file, not a run folder")
+    saved: dict[str, Any] = {}
+    if resume:
+        if not (out / SETTINGS).exists():
+            raise ValueError(f"{out}: no fine-tune to resume ({SETTINGS} missing)")
+        saved = _read_json(out / SETTINGS, "settings")
+        try:
+            settings = ESSettings(**saved["settings"])
+        except (TypeError, KeyError):
+            raise ValueError(f"{out / SETTINGS}: not the fine-tune's settings") from None
+    else:
+        if start is None:
+            raise ValueError("start: the model file to fine-tune is required unless resuming")
+        settings = settings or ESSettings(start=str(start))
+        settings = ESSettings(**{**asdict(settings), "start": str(Path(start).resolve())})
+        if (out / SETTINGS).exists() or (out / STATE).exists():
+            raise ValueError(f"{out}: holds a fine-tune already (--resume it, or a new --out)")
+    settings.check()
     start_path = Path(settings.start)
     if not start_path.exists():
         raise FileNotFoundError(f"{start_path}: no such model file")
+    digest = file_sha256(start_path)
+    if resume and saved.get("start_sha256") not in (None, digest):
+        raise ValueError(f"{start_path}: changed since the fine-tune began (its SHA-256 differs)")
+    if (out / "model.zip").resolve() == start_path.resolve():
+        raise ValueError(
+            f"{out}: the start's own folder and name; the fine-tune would overwrite it"
+        )
     meta = model_metadata(start_path)
     norm_file = start_path.with_suffix(".vecnormalize.pkl")
     if meta.get("obs_normalization") and not norm_file.exists():
@@ -385,26 +446,32 @@ def _finetune(
     layers, _ = actor_layers(base.model)
     if not 1 <= settings.layers <= len(layers):
         raise ValueError(f"layers: 1-{len(layers)} for this actor, got {settings.layers}")
+    veh, kwargs, _, tier = env_setup(start_path)  # refuses a vehicle the benchmark lacks
+    check_policy(base, veh.id, tier, kwargs["control_period_s"])
     moving = layers[len(layers) - settings.layers :]
     theta0 = get_parameters(moving)
-    out.mkdir(parents=True, exist_ok=True)
 
+    history: list[dict[str, Any]] = []
     if resume:
-        st = np.load(out / STATE)
-        theta, m, v, done = st["theta"], st["m"], st["v"], int(st["generation"])
-        history = json.loads((out / HISTORY).read_text())
-        pool = json.loads((out / POOL).read_text())
+        pool = _read_pool(out / POOL, start_path, settings.pool)
+        if pool is None:
+            raise ValueError(f"{out / POOL}: not this fine-tune's pool")
+        if (out / STATE).exists():
+            theta, m, v, done = _read_state(out / STATE, theta0.size)
+            history = _read_json(out / HISTORY, "history")
+            if not isinstance(history, list) or len(history) < done:
+                raise ValueError(f"{out / HISTORY}: fewer rows than the {done} generations done")
+            history = history[:done]  # a stop between the two writes: the state decides
+        else:  # stopped in the first generation
+            theta, m, v, done = theta0.copy(), np.zeros_like(theta0), np.zeros_like(theta0), 0
     else:
+        out.mkdir(parents=True, exist_ok=True)
         theta, m, v, done = theta0.copy(), np.zeros_like(theta0), np.zeros_like(theta0), 0
-        history = []
-        pool = _saved_pool(out / POOL, start_path, settings.pool)
+        pool = _read_pool(out / POOL, start_path, settings.pool)
         if pool is None:
             pool = training_pool(start_path, settings.pool, progress)
-            _write_json(out / POOL, pool)
         elif progress is not None:
             progress(f"pool: {settings.pool} training stops from {out / POOL}")
-        # the settings first, so a run stopped in its first call can be resumed
-        _write_json(out / SETTINGS, {"settings": asdict(settings), "generations": 0})
     seeds = np.array(pool["seeds"])
     r_none, r_cls = np.array(pool["r_none"]), np.array(pool["r_classical"])
     scored = np.flatnonzero(r_cls - r_none >= MIN_GAIN)
@@ -412,6 +479,10 @@ def _finetune(
         raise ValueError(
             f"pool: {scored.size} scored stops, fewer than {settings.stops} a generation"
         )
+    if not resume:  # the pool and the settings first, so a run stopped now can be resumed
+        _write_json(out / POOL, pool)
+        _write_json(out / SETTINGS, {"settings": asdict(settings), "start_sha256": digest,
+                                     "generations": 0})  # fmt: skip
     beta1, beta2, adam_eps = 0.9, 0.999, 1e-8
     t0 = time.time()
     for g in range(done, done + generations):
@@ -452,9 +523,11 @@ def _finetune(
             "wall_s": round(time.time() - tg, 1),
         }
         history.append(row)
+        # the history first: a stop between the two writes leaves it a row ahead, which a
+        # resume cuts back to the state's generations
+        _write_json(out / HISTORY, history)
         np.savez(out / (STATE + ".tmp.npz"), theta=theta, m=m, v=v, generation=g + 1)
         os.replace(out / (STATE + ".tmp.npz"), out / STATE)
-        _write_json(out / HISTORY, history)
         if progress is not None:
             progress(
                 f"generation {g}: current {row['score_current']:.4f} vs start "
@@ -464,6 +537,7 @@ def _finetune(
     model_path = write_model(start_path, out / "model.zip", theta, settings.layers, meta)
     payload = {
         "settings": asdict(settings),
+        "start_sha256": digest,
         "generations": len(history),
         "model_path": str(model_path),
         "start": str(start_path),
