@@ -2,7 +2,9 @@
 less than the other, the median and mean return change per rail (metres: the return is minus
 the stop's cost in units of 100 m), and how much of the summed change its (up to) five largest
 gains carry, or losses where the sum is a loss (a mean moved by a few stops is not a typical
-stop's). Reads the JSON of ``wsp-env benchmark --json`` (which keeps every run) or of
+stop's); where the base file holds the locked-wheel and classical runs, the difference of the
+two scores with a paired bootstrap interval (``benchmark.paired_difference``). Reads the JSON
+of ``wsp-env benchmark --json`` (which keeps every run) or of
 ``scripts/slip_target_benchmark.py --json``; the two files must hold the same stops.
 
     .venv/bin/python scripts/compare_stops.py runs/exp/bench_const425.json slip_target_4.25kmh \\
@@ -29,6 +31,19 @@ def runs_of(path: str, policy: str) -> tuple[dict[tuple[str, int], dict], tuple[
         raise SystemExit(f"{path}: no runs of policy {policy!r} (has: {', '.join(runs) or 'none'})")
     return {(r["scenario"], int(r["seed"])): r for r in runs[policy]}, (
         data.get("vehicle"), data.get("tier"))  # fmt: skip
+
+
+def _ends(path: str, keys: list[tuple[str, int]]) -> tuple[np.ndarray, np.ndarray] | None:
+    """The locked-wheel and classical returns on ``keys`` from the benchmark JSON at ``path``
+    (the score's ends), or None where the file lacks them."""
+    runs = json.loads(Path(path).read_text(encoding="utf-8")).get("run_results", {})
+    ends = []
+    for name in ("none", "classical"):
+        by_key = {(r["scenario"], int(r["seed"])): r["return"] for r in runs.get(name) or []}
+        if not all(k in by_key for k in keys):
+            return None
+        ends.append(np.array([by_key[k] for k in keys]))
+    return ends[0], ends[1]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -63,6 +78,19 @@ def main(argv: list[str] | None = None) -> int:
             f"{', '.join(f'{100 * t:+.0f}' for t in top)} m) carry "
             f"{100 * top.sum() / total:.0f} % of the summed change"
         )
+    ends = _ends(args.base_json, keys)
+    if ends is not None:
+        from wsp_env.evaluation.benchmark import paired_difference
+
+        r_o = np.array([other[k]["return"] for k in keys])
+        r_b = np.array([base[k]["return"] for k in keys])
+        d = paired_difference(r_o, r_b, *ends)
+        if d["difference"] is not None:
+            lo, hi = d["difference_ci95"]
+            print(
+                f"  score difference, paired over the {d['scored_runs']} scored stops: "
+                f"{d['difference']:+.4f} (95 % {lo:+.4f} to {hi:+.4f})"
+            )
     by_rail: dict[str, list[float]] = {}
     for k, d in zip(keys, diff, strict=True):
         by_rail.setdefault(str(other[k]["conditions"].get("rail")), []).append(float(d))

@@ -20,6 +20,7 @@ from wsp_env.evaluation.benchmark import (
     SEALED_RUNS,
     STOP_SETS,
     iqm,
+    paired_difference,
     run_benchmark,
     score,
     sealed_runs,
@@ -100,6 +101,28 @@ def test_score_ends_and_interval():
     assert s["scored_runs"] == 180
     assert s["score_ci95"][0] < s["score"] < s["score_ci95"][1]
     assert s["score"] == pytest.approx(0.5, abs=0.03)
+
+
+def test_paired_difference_sees_a_small_gain_that_the_scores_intervals_hide():
+    """Two policies whose normalised returns spread widely over stops but differ by a small
+    constant on every stop: the paired interval of the difference lies above 0 and is far
+    narrower than either score's own; a policy against itself differs by exactly 0."""
+    rng = np.random.default_rng(2)
+    r_none = -rng.uniform(5, 10, 300)
+    gain = rng.uniform(0.5, 2.0, 300)
+    r_cls = r_none + gain
+    base = r_none + gain * rng.uniform(0.8, 1.2, 300)
+    other = base + 0.003 * gain
+    d = paired_difference(other, base, r_none, r_cls)
+    assert d["difference"] == pytest.approx(0.003, abs=1e-9)
+    lo, hi = d["difference_ci95"]
+    assert 0 < lo <= 0.003 <= hi
+    s_lo, s_hi = score(other, r_none, r_cls)["score_ci95"]
+    assert s_lo < score(base, r_none, r_cls)["score"]  # unpaired: not clear of the base
+    assert hi - lo < 0.1 * (s_hi - s_lo)
+    same = paired_difference(base, base, r_none, r_cls)
+    assert same["difference"] == 0.0 and same["difference_ci95"] == [0.0, 0.0]
+    assert paired_difference(base, base, r_none, r_none)["difference"] is None
 
 
 def test_registered_ids_fix_vehicle_tier_and_distribution():

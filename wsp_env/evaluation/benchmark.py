@@ -131,6 +131,30 @@ def score(
     return out
 
 
+def paired_difference(
+    r_other: np.ndarray, r_base: np.ndarray, r_none: np.ndarray, r_classical: np.ndarray,
+    seed: int = 0,
+) -> dict[str, Any]:  # fmt: skip
+    """``score(other) - score(base)`` on the same stops with a 95 % percentile-bootstrap
+    interval that resamples the stops once for both (paired): the spread of the stops, common
+    to both, drops out, so the interval is that of the difference, not of either score.
+    ``None`` fields where no stop is scored."""
+    gain = r_classical - r_none
+    scored = gain >= MIN_GAIN
+    n = int(scored.sum())
+    if n == 0:
+        return {"difference": None, "difference_ci95": None, "scored_runs": 0}
+    s_o = (r_other[scored] - r_none[scored]) / gain[scored]
+    s_b = (r_base[scored] - r_none[scored]) / gain[scored]
+    idx = np.random.default_rng(seed).integers(0, n, (BOOTSTRAP, n))
+    boot = iqm(s_o[idx], axis=1) - iqm(s_b[idx], axis=1)
+    return {
+        "difference": float(iqm(s_o) - iqm(s_b)),
+        "difference_ci95": [float(np.percentile(boot, 2.5)), float(np.percentile(boot, 97.5))],
+        "scored_runs": n,
+    }
+
+
 def family(result: dict[str, Any]) -> dict[str, str]:
     """A stop's scenario families: its rail, gradient sign and speed band."""
     c = result["conditions"]
