@@ -30,8 +30,8 @@ def short_stops(monkeypatch):
     the same either way, and an untrained model's stops are long."""
     setup = es.env_setup
 
-    def capped(start):
-        veh, kwargs, _, tier = setup(start)
+    def capped(policy):
+        veh, kwargs, _, tier = setup(policy)
         return veh, kwargs, 8.0, tier
 
     monkeypatch.setattr(es, "env_setup", capped)
@@ -49,7 +49,7 @@ def start(tmp_path_factory):
 
 
 def _returns(policy, start, seeds):
-    veh, kwargs, max_time_s, _ = es.env_setup(start)
+    veh, kwargs, max_time_s, _ = es.env_setup(SB3Policy(start))
     res, _ = run_runs(veh, es.training_runs(veh, seeds), policy, max_time_s=max_time_s,
                       env_kwargs=kwargs, policy_keys=POLICY_KEYS)  # fmt: skip
     return np.array([r["return"] for r in res])

@@ -293,7 +293,7 @@ def _check_axle_offsets(meta_path: Path, veh: dict[str, Any]) -> None:
         if off[i] < off[i - 1]:
             raise _fail(meta_path, f"{field}: axle {i + 1} ({off[i]:g} m) is ahead of axle {i} "
                         f"({off[i - 1]:g} m): list the axles in running order")  # fmt: skip
-        if off[i] == off[i - 1]:  # two wheelsets cannot share a place (and all-zero reads as
+        if off[i] == off[i - 1]:  # two wheelsets cannot share a place (all zeros: unknown)
             raise _fail(meta_path, f"{field}: axle {i + 1} at the place of axle {i} "
                         f"({off[i]:g} m)")  # fmt: skip
     if off[-1] > MAX_TRAIN_LENGTH_M:

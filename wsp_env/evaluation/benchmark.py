@@ -110,18 +110,27 @@ def iqm(values: np.ndarray, axis: int = -1) -> np.ndarray:
     return (x * weights.reshape(shape)).sum(axis=axis) / weights.sum()
 
 
+def normalised(
+    r_policy: np.ndarray, r_none: np.ndarray, r_classical: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each scored stop's ``(R - R_none) / (R_classical - R_none)`` (the last axis of
+    ``r_policy`` runs over stops: one row per policy is fine) and the mask of scored stops
+    (where the classical WSP gains at least ``MIN_GAIN``)."""
+    gain = r_classical - r_none
+    scored = gain >= MIN_GAIN
+    return (r_policy[..., scored] - r_none[scored]) / gain[scored], scored
+
+
 def score(
     r_policy: np.ndarray, r_none: np.ndarray, r_classical: np.ndarray, seed: int = 0
 ) -> dict[str, Any]:
     """IQM of the per-stop normalised returns with a 95 % percentile-bootstrap interval
     (module docstring); ``None`` fields where no stop is scored."""
-    gain = r_classical - r_none
-    scored = gain >= MIN_GAIN
+    s, scored = normalised(r_policy, r_none, r_classical)
     n = int(scored.sum())
     out: dict[str, Any] = {"score": None, "score_ci95": None, "scored_runs": n}
     if n == 0:
         return out
-    s = (r_policy[scored] - r_none[scored]) / gain[scored]
     rng = np.random.default_rng(seed)
     boot = iqm(s[rng.integers(0, n, (BOOTSTRAP, n))], axis=1)
     out["score"] = float(iqm(s))
@@ -139,13 +148,10 @@ def paired_difference(
     interval that resamples the stops once for both (paired): the spread of the stops, common
     to both, drops out, so the interval is that of the difference, not of either score.
     ``None`` fields where no stop is scored."""
-    gain = r_classical - r_none
-    scored = gain >= MIN_GAIN
+    (s_o, s_b), scored = normalised(np.stack([r_other, r_base]), r_none, r_classical)
     n = int(scored.sum())
     if n == 0:
         return {"difference": None, "difference_ci95": None, "scored_runs": 0}
-    s_o = (r_other[scored] - r_none[scored]) / gain[scored]
-    s_b = (r_base[scored] - r_none[scored]) / gain[scored]
     idx = np.random.default_rng(seed).integers(0, n, (BOOTSTRAP, n))
     boot = iqm(s_o[idx], axis=1) - iqm(s_b[idx], axis=1)
     return {

@@ -36,10 +36,9 @@ start's normalisation beside it and its metadata inside), scored like any other.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
-import os
-import shutil
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
@@ -52,18 +51,20 @@ from wsp_env.core.config import load_vehicle
 from wsp_env.envs.tiers import benchmark_env_kwargs
 from wsp_env.evaluation.benchmark import (
     DAMAGE_CRITERIA,
-    MIN_GAIN,
     POLICY_KEYS,
     check_policy,
     iqm,
+    normalised,
 )
 from wsp_env.evaluation.runner import run_runs
 from wsp_env.evaluation.suites import Run
+from wsp_env.files import write_atomically, write_json
 from wsp_env.policy import (
     INFERENCE_BLOCK,
     SB3Policy,
     model_metadata,
     require_extras,
+    sensor_tier,
     write_model_metadata,
 )
 from wsp_env.threads import applied, thread_policy
@@ -205,11 +206,11 @@ class PopulationPolicy(SB3Policy):
             out_f, in_f = lin.weight.shape
             w = thetas[:, i : i + out_f * in_f].reshape(-1, out_f, in_f)
             i += out_f * in_f
-            b = thetas[:, i : i + out_f].reshape(-1, 1, out_f)
+            b = thetas[:, i : i + out_f]
             i += out_f
             self._weights.append(
                 (torch.as_tensor(w, dtype=torch.float32).contiguous(),
-                 torch.as_tensor(b.reshape(-1, out_f), dtype=torch.float32))
+                 torch.as_tensor(b, dtype=torch.float32).contiguous())
             )  # fmt: skip
         if i != thetas.shape[1]:
             raise ValueError(f"parameters: {thetas.shape[1]} a member for layers holding {i}")
@@ -262,23 +263,23 @@ class PopulationPolicy(SB3Policy):
 def centred_ranks(x: np.ndarray) -> np.ndarray:
     """Ranks scaled to [-0.5, 0.5] (ties share their mean rank): the fitness shaping of
     Salimans et al. (2017), invariant to the fitness' scale."""
-    order = np.argsort(x, kind="stable")
-    ranks = np.empty(len(x))
-    ranks[order] = np.arange(len(x), dtype=float)
-    for v in np.unique(x):  # ties: their mean rank
-        tie = x == v
-        ranks[tie] = ranks[tie].mean()
-    return ranks / max(len(x) - 1, 1) - 0.5
+    from scipy.stats import rankdata
+
+    return (rankdata(x) - 1.0) / max(len(x) - 1, 1) - 0.5
 
 
-def env_setup(start: Path) -> tuple[Any, dict[str, Any], float, str]:
-    """The start's vehicle, the benchmark's environment settings for its tier, the time limit
-    and the tier."""
-    meta = model_metadata(start)
-    tier = "wheels+accel" if (meta.get("env_kwargs") or {}).get("accelerometer") else "wheels"
-    kwargs = benchmark_env_kwargs(meta.get("vehicle") or "uic_z1", tier)
+def env_setup(policy: SB3Policy) -> tuple[Any, dict[str, Any], float, str]:
+    """A loaded policy's vehicle, the benchmark's environment settings for its sensor tier
+    (``policy.sensor_tier``), the time limit and the tier."""
+    tier = sensor_tier(policy) or "wheels"
+    kwargs = benchmark_env_kwargs(policy.vehicle or "uic_z1", tier)
     veh = load_vehicle(kwargs.pop("vehicle"))
     return veh, kwargs, float(kwargs.pop("max_time_s")), tier
+
+
+def pool_seeds(n: int) -> list[int]:
+    """The seeds of a pool of ``n`` training stops."""
+    return [TRAINING_SEED_BASE + i for i in range(n)]
 
 
 def training_runs(veh: Any, seeds: list[int], copies: int = 1) -> list[Run]:
@@ -290,20 +291,15 @@ def training_runs(veh: Any, seeds: list[int], copies: int = 1) -> list[Run]:
     ]
 
 
-def _write_json(path: Path, payload: Any) -> None:
-    """Atomically: a temporary file renamed over ``path`` (a stop never leaves half a file)."""
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(payload, indent=1))
-    os.replace(tmp, path)
-
-
-def training_pool(start: Path, n: int, progress: Callable[[str], None] | None = None) -> dict:
+def training_pool(
+    start: SB3Policy, n: int, progress: Callable[[str], None] | None = None
+) -> dict[str, Any]:
     """The pool's seeds and their locked-wheel and classical returns (the score's ends), for
     the start's vehicle and sensor tier."""
     from wsp_env.policy import make_policy
 
     veh, kwargs, max_time_s, tier = env_setup(start)
-    seeds = [TRAINING_SEED_BASE + i for i in range(n)]
+    seeds = pool_seeds(n)
     runs = training_runs(veh, seeds)
     out: dict[str, Any] = {"seeds": seeds, "tier": tier, "vehicle": veh.id}
     for name in ("none", "classical"):
@@ -315,17 +311,20 @@ def training_pool(start: Path, n: int, progress: Callable[[str], None] | None = 
     return out
 
 
-def _read_pool(path: Path, start: Path, n: int) -> dict | None:
+def _read_pool(path: Path, start: SB3Policy, n: int) -> dict | None:
     """The pool in ``path`` if it is this start's vehicle and tier and ``n`` stops (a first call
     stopped before its first generation ended, a pool copied from another run), else None."""
     if not path.exists():
         return None
     pool = _read_json(path, "pool")
     veh, _, _, tier = env_setup(start)
-    seeds = [TRAINING_SEED_BASE + i for i in range(n)]
     if not isinstance(pool, dict):
         return None
-    same = pool.get("tier") == tier and pool.get("vehicle") == veh.id and pool.get("seeds") == seeds
+    same = (
+        pool.get("tier") == tier
+        and pool.get("vehicle") == veh.id
+        and pool.get("seeds") == pool_seeds(n)
+    )
     ends = [pool.get(k) for k in ("r_none", "r_classical")]
     ok = all(isinstance(e, list) and len(e) == n for e in ends)
     if ok:
@@ -358,13 +357,8 @@ def _read_state(path: Path, size: int) -> tuple[np.ndarray, np.ndarray, np.ndarr
 
 def file_sha256(path: Path) -> str:
     """The file's SHA-256 (a fine-tune pins its start with it)."""
-    import hashlib
-
-    h = hashlib.sha256()
     with open(path, "rb") as fh:
-        for chunk in iter(lambda: fh.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
+        return hashlib.file_digest(fh, "sha256").hexdigest()
 
 
 def evaluate_population(
@@ -372,8 +366,8 @@ def evaluate_population(
 ) -> np.ndarray:
     """Each member's return on each stop, ``(members, stops)``: one batch of environments
     through the benchmark's runner."""
-    veh, kwargs, max_time_s, _ = env_setup(start)
     policy = PopulationPolicy(start, thetas, len(seeds), n_layers)
+    veh, kwargs, max_time_s, _ = env_setup(policy)
     res, _ = run_runs(veh, training_runs(veh, seeds, len(thetas)), policy, max_time_s=max_time_s,
                       env_kwargs=kwargs, policy_keys=POLICY_KEYS)  # fmt: skip
     return np.array([r["return"] for r in res]).reshape(len(thetas), len(seeds))
@@ -446,14 +440,14 @@ def _finetune(
     layers, _ = actor_layers(base.model)
     if not 1 <= settings.layers <= len(layers):
         raise ValueError(f"layers: 1-{len(layers)} for this actor, got {settings.layers}")
-    veh, kwargs, _, tier = env_setup(start_path)  # refuses a vehicle the benchmark lacks
+    veh, kwargs, _, tier = env_setup(base)  # refuses a vehicle the benchmark lacks
     check_policy(base, veh.id, tier, kwargs["control_period_s"])
     moving = layers[len(layers) - settings.layers :]
     theta0 = get_parameters(moving)
 
     history: list[dict[str, Any]] = []
     if resume:
-        pool = _read_pool(out / POOL, start_path, settings.pool)
+        pool = _read_pool(out / POOL, base, settings.pool)
         if pool is None:
             raise ValueError(f"{out / POOL}: not this fine-tune's pool")
         if (out / STATE).exists():
@@ -467,21 +461,21 @@ def _finetune(
     else:
         out.mkdir(parents=True, exist_ok=True)
         theta, m, v, done = theta0.copy(), np.zeros_like(theta0), np.zeros_like(theta0), 0
-        pool = _read_pool(out / POOL, start_path, settings.pool)
+        pool = _read_pool(out / POOL, base, settings.pool)
         if pool is None:
-            pool = training_pool(start_path, settings.pool, progress)
+            pool = training_pool(base, settings.pool, progress)
         elif progress is not None:
             progress(f"pool: {settings.pool} training stops from {out / POOL}")
     seeds = np.array(pool["seeds"])
     r_none, r_cls = np.array(pool["r_none"]), np.array(pool["r_classical"])
-    scored = np.flatnonzero(r_cls - r_none >= MIN_GAIN)
+    scored = np.flatnonzero(normalised(r_cls, r_none, r_cls)[1])  # the mask of scored stops
     if scored.size < settings.stops:
         raise ValueError(
             f"pool: {scored.size} scored stops, fewer than {settings.stops} a generation"
         )
     if not resume:  # the pool and the settings first, so a run stopped now can be resumed
-        _write_json(out / POOL, pool)
-        _write_json(out / SETTINGS, {"settings": asdict(settings), "start_sha256": digest,
+        write_json(out / POOL, pool)
+        write_json(out / SETTINGS, {"settings": asdict(settings), "start_sha256": digest,
                                      "generations": 0})  # fmt: skip
     beta1, beta2, adam_eps = 0.9, 0.999, 1e-8
     t0 = time.time()
@@ -495,8 +489,7 @@ def _finetune(
         )
         returns = evaluate_population(start_path, thetas, [int(s) for s in seeds[pick]],
                                       settings.layers)  # fmt: skip
-        gain = r_cls[pick] - r_none[pick]
-        s = (returns - r_none[pick]) / gain
+        s, _ = normalised(returns, r_none[pick], r_cls[pick])  # every picked stop is scored
         fitness = iqm(s, axis=1)
         u = centred_ranks(fitness[2:])
         k = settings.pairs
@@ -525,9 +518,9 @@ def _finetune(
         history.append(row)
         # the history first: a stop between the two writes leaves it a row ahead, which a
         # resume cuts back to the state's generations
-        _write_json(out / HISTORY, history)
-        np.savez(out / (STATE + ".tmp.npz"), theta=theta, m=m, v=v, generation=g + 1)
-        os.replace(out / (STATE + ".tmp.npz"), out / STATE)
+        write_json(out / HISTORY, history)
+        state = {"theta": theta, "m": m, "v": v, "generation": g + 1}
+        write_atomically(out / STATE, lambda fh, st=state: np.savez(fh, **st), binary=True)
         if progress is not None:
             progress(
                 f"generation {g}: current {row['score_current']:.4f} vs start "
@@ -549,7 +542,7 @@ def _finetune(
         "distance_from_start": float(np.linalg.norm(theta - theta0)),
         "last": history[-1] if history else None,
     }
-    _write_json(out / SETTINGS, payload)
+    write_json(out / SETTINGS, payload)
     return payload
 
 
@@ -566,6 +559,7 @@ def write_model(start: Path, path: Path, theta: np.ndarray, n_layers: int,
                                "finetuned_from": str(start)})  # fmt: skip
     norm = start.with_suffix(".vecnormalize.pkl")
     if norm.exists():
-        shutil.copyfile(norm, path.with_suffix(".vecnormalize.pkl"))
-    os.replace(tmp, path)
+        data = norm.read_bytes()
+        write_atomically(path.with_suffix(".vecnormalize.pkl"), lambda fh: fh.write(data), True)
+    tmp.replace(path)
     return path
