@@ -59,7 +59,8 @@ def test_a_member_acts_as_the_model_file_holding_its_weights_bit_for_bit(start, 
     layers, _ = es.actor_layers(SB3Policy(start).model)
     theta0 = es.get_parameters(layers[-1:])
     theta1 = theta0 + 0.05 * np.random.default_rng(0).standard_normal(theta0.size)
-    both = es.evaluate_population(start, np.stack([theta0, theta1]), SEEDS, 1)
+    both, watchdog = es.evaluate_population(start, np.stack([theta0, theta1]), SEEDS, 1)
+    assert watchdog.shape == both.shape and watchdog.dtype == bool
     assert np.array_equal(both[0], _returns(SB3Policy(start), start, SEEDS))
     moved = es.write_model(start, tmp_path / "model.zip", theta1, 1, _meta(start))
     assert np.array_equal(both[1], _returns(SB3Policy(moved), start, SEEDS))
@@ -67,7 +68,7 @@ def test_a_member_acts_as_the_model_file_holding_its_weights_bit_for_bit(start, 
     # two moving layers: the same weights in a member and in a file
     theta2 = es.get_parameters(layers[-2:])
     theta2 = theta2 + 0.05 * np.random.default_rng(1).standard_normal(theta2.size)
-    pair = es.evaluate_population(start, np.stack([theta2, theta2]), SEEDS[:2], 2)
+    pair, _ = es.evaluate_population(start, np.stack([theta2, theta2]), SEEDS[:2], 2)
     (tmp_path / "two").mkdir()
     moved = es.write_model(start, tmp_path / "two" / "model.zip", theta2, 2, _meta(start))
     assert np.array_equal(pair[0], pair[1])
@@ -80,9 +81,9 @@ def _meta(start):
     return model_metadata(start)
 
 
-def _finetune(start, out, generations, resume=False):
+def _finetune(start, out, generations, resume=False, **more):
     settings = es.ESSettings(start=str(start), pairs=1, stops=2, pool=4, sigma=0.05,
-                             learning_rate=0.01, seed=5)  # fmt: skip
+                             learning_rate=0.01, seed=5, **more)  # fmt: skip
     return es.finetune(start, out, generations, None if resume else settings, resume=resume)
 
 
@@ -192,6 +193,43 @@ def test_a_fine_tune_stopped_in_its_first_generation_resumes_and_damage_is_one_l
         _finetune(start, start.parent, 0)
 
 
+def test_averaged_and_guarded_fine_tune_resumes_and_writes_the_average(start, tmp_path):
+    """With ``average`` and ``guard`` on, a resumed run still ends where one go ends, the
+    written model holds the average (not the last step), and the history counts the guard."""
+    more = {"average": 0.5, "guard": 0.01}
+    one = _finetune(start, tmp_path / "one", 3, **more)
+    _finetune(start, tmp_path / "two", 2, **more)
+    _finetune(None, tmp_path / "two", 1, resume=True)
+    a, b = np.load(tmp_path / "one" / es.STATE), np.load(tmp_path / "two" / es.STATE)
+    assert np.array_equal(a["theta"], b["theta"])
+    assert np.array_equal(a["theta_average"], b["theta_average"])
+    want = es.averaged(a["theta"], a["theta_average"], 0.5, 3)
+    assert not np.allclose(want, a["theta"])  # the average is not the last step
+    layers, _ = es.actor_layers(SB3Policy(tmp_path / "one" / "model.zip").model)
+    assert np.allclose(es.get_parameters(layers[-1:]), want, atol=1e-7)
+    hist = json.loads((tmp_path / "one" / es.HISTORY).read_text())
+    assert all(0 <= r["members_guarded"] <= 2 for r in hist) and one["generations"] == 3
+    assert hist[0]["current_guarded"] is False  # generation 0's current is the start
+
+
+def test_the_average_is_bias_corrected_and_the_guard_names_tail_losses_and_new_watchdogs():
+    theta = np.array([1.0, -2.0])
+    total = np.zeros(2)
+    for _ in range(3):  # the same iterate three times: its average is itself
+        total = 0.9 * total + 0.1 * theta
+    assert np.allclose(es.averaged(theta + 5, total, 0.9, 3), theta)
+    assert np.array_equal(es.averaged(theta, total, 0.0, 3), theta)  # off: the last step
+    assert np.array_equal(es.averaged(theta, total, 0.9, 0), theta)  # no step yet
+    # rows: the start, then three members; columns: stops
+    s = np.array([[1.0, 1.0, 1.0], [1.2, 1.1, 0.95], [1.3, 1.3, 0.7], [1.0, 1.0, 1.0]])
+    wd = np.zeros_like(s, dtype=bool)
+    wd[3, 0] = True  # a new intervention
+    assert es.guarded(s, wd, 0.1).tolist() == [False, True, True]
+    assert es.guarded(s, wd, 0.0).tolist() == [False, False, False]  # off
+    wd[0, 0] = True  # where the start had one too, it does not count
+    assert es.guarded(s, wd, 0.1).tolist() == [False, True, False]
+
+
 def _untimed(row):
     return {k: v for k, v in row.items() if k != "wall_s"}
 
@@ -227,6 +265,12 @@ def test_centred_ranks_are_scale_free_and_share_ties():
         (["{out}/missing.zip", "--out", "{out}", "--generations", "1"], "no such model file"),
         (["{start}", "--out", "{start}", "--generations", "1"], "a file, not a run folder"),
         (["{start}", "--out", "{out}", "--generations", "-1"], "--generations: must be >= 0"),
+        (["{start}", "--out", "{out}", "--generations", "1", "--average", "1"],
+         "average: must be a number in [0, 1)"),
+        (["{start}", "--out", "{out}", "--generations", "1", "--guard", "-0.5"],
+         "guard: must be a number >= 0"),
+        (["{start}", "--out", "{out}", "--generations", "1", "--guard", "nan"],
+         "guard: must be a number >= 0"),
     ],
 )  # fmt: skip
 def test_bad_fine_tune_input_is_one_line_and_writes_nothing(start, tmp_path, capsys, argv,

@@ -722,6 +722,8 @@ def _add_finetune(sub: argparse._SubParsersAction) -> None:
         ("--learning-rate", _positive, "Adam's step"),
         ("--layers", int, "the actor's last layers that move"),
         ("--seed", _seed, "the draws' seed"),
+        ("--average", float, "decay of the written weights' running average (0: last step's)"),
+        ("--guard", float, "a member losing this much on any stop ranks last (0: off)"),
     ):
         name = flag[2:].replace("-", "_")
         p.add_argument(flag, type=kind, default=None,
@@ -731,7 +733,8 @@ def _add_finetune(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=cmd_finetune)
 
 
-FINETUNE_SETTINGS = ("pairs", "stops", "pool", "sigma", "learning_rate", "layers", "seed")
+FINETUNE_SETTINGS = ("pairs", "stops", "pool", "sigma", "learning_rate", "layers", "seed",
+                     "average", "guard")  # fmt: skip
 
 
 def cmd_finetune(args: argparse.Namespace) -> dict[str, Any]:

@@ -92,7 +92,19 @@ class ESSettings:
     ``learning_rate``             0.001    Adam's step, in parameter units
     ``layers``                    1        the actor's last linear layers that move (1: head)
     ``seed``                      0        every draw comes from ``(seed, generation)``
+    ``average``                   0.0      decay of the weights' running average, which is
+                                           scored as "current" and written (0: the last step's)
+    ``guard``                     0.0      > 0: a member that returns ``guard`` (in the score's
+                                           units) less than the start on any stop of its
+                                           generation, or brings the watchdog where the
+                                           start ran without it, ranks below every member that
+                                           does neither (0: no guard)
     ============================  =======  ==================================================
+
+    ``average`` is Polyak-Ruppert averaging (Polyak & Juditsky 1992, SIAM J. Control Optim.
+    30(4)) in its exponential form: the Adam iterates jitter around the optimum at the scale of
+    the learning rate, and their average sits nearer to it. ``guard`` keeps the score's tails,
+    which the IQM does not weigh, from being traded for its middle.
     """
 
     start: str
@@ -103,6 +115,8 @@ class ESSettings:
     learning_rate: float = 0.001
     layers: int = 1
     seed: int = 0
+    average: float = 0.0
+    guard: float = 0.0
 
     def check(self) -> None:
         """One line naming the first bad field."""
@@ -120,6 +134,12 @@ class ESSettings:
                 raise ValueError(f"{name}: must be a positive number, got {v!r}")
         if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
             raise ValueError(f"seed: must be a whole number >= 0, got {self.seed!r}")
+        a = self.average
+        if isinstance(a, bool) or not isinstance(a, (int, float)) or not 0 <= a < 1:
+            raise ValueError(f"average: must be a number in [0, 1), got {a!r}")
+        g = self.guard
+        if isinstance(g, bool) or not isinstance(g, (int, float)) or not 0 <= g < math.inf:
+            raise ValueError(f"guard: must be a number >= 0, got {g!r}")
 
 
 def actor_layers(model: Any) -> tuple[list[Any], type]:
@@ -342,17 +362,28 @@ def _read_json(path: Path, what: str) -> Any:
         raise ValueError(f"{path}: not the fine-tune's {what} ({type(err).__name__})") from None
 
 
-def _read_state(path: Path, size: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
-    """The saved weights, Adam's moments and the generations done, or one line naming the
-    file."""
+def _read_state(path: Path, size: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, int,
+                                               np.ndarray]:  # fmt: skip
+    """The saved weights, Adam's moments, the generations done and the weights' running sum
+    (zeros in a state from before ``average``), or one line naming the file."""
     try:
         with np.load(path) as st:
             theta, m, v, done = st["theta"], st["m"], st["v"], int(st["generation"])
+            avg = st["theta_average"] if "theta_average" in st.files else np.zeros_like(theta)
     except Exception as err:  # a damaged file: numpy, zipfile and pickle each raise their own
         raise ValueError(f"{path}: not the fine-tune's state ({type(err).__name__})") from None
-    if not (theta.shape == m.shape == v.shape == (size,)) or done < 0:
+    if not (theta.shape == m.shape == v.shape == avg.shape == (size,)) or done < 0:
         raise ValueError(f"{path}: holds {theta.size} parameters, the start's layers {size}")
-    return theta, m, v, done
+    return theta, m, v, done, avg
+
+
+def averaged(theta: np.ndarray, total: np.ndarray, decay: float, steps: int) -> np.ndarray:
+    """The weights scored as "current" and written: ``theta`` itself without averaging or before
+    the first step, else the bias-corrected exponential average of the ``steps`` iterates
+    (``total`` is their zero-started running average, as Adam's moments)."""
+    if decay <= 0 or steps <= 0:
+        return theta
+    return total / (1.0 - decay**steps)
 
 
 def file_sha256(path: Path) -> str:
@@ -363,14 +394,29 @@ def file_sha256(path: Path) -> str:
 
 def evaluate_population(
     start: Path, thetas: np.ndarray, seeds: list[int], n_layers: int
-) -> np.ndarray:
-    """Each member's return on each stop, ``(members, stops)``: one batch of environments
-    through the benchmark's runner."""
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each member's return on each stop and whether the watchdog intervened there, both
+    ``(members, stops)``: one batch of environments through the benchmark's runner."""
     policy = PopulationPolicy(start, thetas, len(seeds), n_layers)
     veh, kwargs, max_time_s, _ = env_setup(policy)
     res, _ = run_runs(veh, training_runs(veh, seeds, len(thetas)), policy, max_time_s=max_time_s,
                       env_kwargs=kwargs, policy_keys=POLICY_KEYS)  # fmt: skip
-    return np.array([r["return"] for r in res]).reshape(len(thetas), len(seeds))
+    shape = (len(thetas), len(seeds))
+    returns = np.array([r["return"] for r in res]).reshape(shape)
+    watchdog = np.array([r["watchdog"]["total"] > 0 for r in res]).reshape(shape)
+    return returns, watchdog
+
+
+def guarded(s: np.ndarray, watchdog: np.ndarray, guard: float) -> np.ndarray:
+    """Which members (rows 1.. of ``s``, normalised returns ``(members, stops)`` whose row 0 is
+    the start) fail the guard: on some stop they return more than ``guard`` less than the
+    start, or the watchdog intervenes where it left the start alone. All False when ``guard``
+    is 0."""
+    if guard <= 0:
+        return np.zeros(s.shape[0] - 1, dtype=bool)
+    worse = (s[1:] < s[0] - guard).any(axis=1)
+    new_watchdog = (watchdog[1:] & ~watchdog[0]).any(axis=1)
+    return worse | new_watchdog
 
 
 def finetune(
@@ -451,16 +497,18 @@ def _finetune(
         if pool is None:
             raise ValueError(f"{out / POOL}: not this fine-tune's pool")
         if (out / STATE).exists():
-            theta, m, v, done = _read_state(out / STATE, theta0.size)
+            theta, m, v, done, total = _read_state(out / STATE, theta0.size)
             history = _read_json(out / HISTORY, "history")
             if not isinstance(history, list) or len(history) < done:
                 raise ValueError(f"{out / HISTORY}: fewer rows than the {done} generations done")
             history = history[:done]  # a stop between the two writes: the state decides
         else:  # stopped in the first generation
             theta, m, v, done = theta0.copy(), np.zeros_like(theta0), np.zeros_like(theta0), 0
+            total = np.zeros_like(theta0)
     else:
         out.mkdir(parents=True, exist_ok=True)
         theta, m, v, done = theta0.copy(), np.zeros_like(theta0), np.zeros_like(theta0), 0
+        total = np.zeros_like(theta0)
         pool = _read_pool(out / POOL, base, settings.pool)
         if pool is None:
             pool = training_pool(base, settings.pool, progress)
@@ -484,22 +532,28 @@ def _finetune(
         rng = np.random.default_rng([settings.seed, g])
         pick = np.sort(rng.choice(scored, size=settings.stops, replace=False))
         eps = rng.standard_normal((settings.pairs, theta.size))
+        current = averaged(theta, total, settings.average, g)
         thetas = np.concatenate(
-            [theta0[None], theta[None], theta + settings.sigma * eps, theta - settings.sigma * eps]
-        )
-        returns = evaluate_population(start_path, thetas, [int(s) for s in seeds[pick]],
-                                      settings.layers)  # fmt: skip
+            [theta0[None], current[None], theta + settings.sigma * eps,
+             theta - settings.sigma * eps]
+        )  # fmt: skip
+        returns, watchdog = evaluate_population(start_path, thetas, [int(s) for s in seeds[pick]],
+                                                settings.layers)  # fmt: skip
         s, _ = normalised(returns, r_none[pick], r_cls[pick])  # every picked stop is scored
         fitness = iqm(s, axis=1)
-        u = centred_ranks(fitness[2:])
+        failed = guarded(s, watchdog, settings.guard)  # rows 1..: current, then the members
+        # the guard's failures below every other member, in their own order among themselves
+        u = centred_ranks(fitness[2:] - np.where(failed[1:], 1e6, 0.0))
         k = settings.pairs
         grad = (u[:k] - u[k:]) @ eps / (2 * k * settings.sigma)
         # Adam, ascending the fitness
+        before = theta
         m = beta1 * m + (1 - beta1) * grad
         v = beta2 * v + (1 - beta2) * grad * grad
         step = g + 1
         m_hat, v_hat = m / (1 - beta1**step), v / (1 - beta2**step)
         theta = theta + settings.learning_rate * m_hat / (np.sqrt(v_hat) + adam_eps)
+        total = settings.average * total + (1 - settings.average) * theta
         row = {
             "generation": g,
             "score_start": float(fitness[0]),
@@ -511,7 +565,12 @@ def _finetune(
             "mean_return_current": float(returns[1].mean()),
             "members_best": float(fitness[2:].max()),
             "members_worst": float(fitness[2:].min()),
-            "step_norm": float(np.linalg.norm(theta - thetas[1])),
+            "members_guarded": int(failed[1:].sum()),
+            "current_guarded": bool(failed[0]),
+            "watchdog_stops_start": int(watchdog[0].sum()),
+            "watchdog_stops_current": int(watchdog[1].sum()),
+            "worst_drop_current": float(np.max(s[0] - s[1])),
+            "step_norm": float(np.linalg.norm(theta - before)),
             "distance_from_start": float(np.linalg.norm(theta - theta0)),
             "wall_s": round(time.time() - tg, 1),
         }
@@ -519,7 +578,7 @@ def _finetune(
         # the history first: a stop between the two writes leaves it a row ahead, which a
         # resume cuts back to the state's generations
         write_json(out / HISTORY, history)
-        state = {"theta": theta, "m": m, "v": v, "generation": g + 1}
+        state = {"theta": theta, "m": m, "v": v, "generation": g + 1, "theta_average": total}
         write_atomically(out / STATE, lambda fh, st=state: np.savez(fh, **st), binary=True)
         if progress is not None:
             progress(
@@ -527,7 +586,8 @@ def _finetune(
                 f"{row['score_start']:.4f} ({row['score_gain']:+.4f}), better on "
                 f"{row['stops_better']:.0%}, worse on {row['stops_worse']:.0%}, {row['wall_s']} s"
             )
-    model_path = write_model(start_path, out / "model.zip", theta, settings.layers, meta)
+    final = averaged(theta, total, settings.average, len(history))  # what "current" was
+    model_path = write_model(start_path, out / "model.zip", final, settings.layers, meta)
     payload = {
         "settings": asdict(settings),
         "start_sha256": digest,
@@ -539,7 +599,7 @@ def _finetune(
         "wall_time_s_this_call": round(time.time() - t0, 1),
         "wall_time_s": round(sum(r["wall_s"] for r in history), 1),
         "parameters": int(theta.size),
-        "distance_from_start": float(np.linalg.norm(theta - theta0)),
+        "distance_from_start": float(np.linalg.norm(final - theta0)),
         "last": history[-1] if history else None,
     }
     write_json(out / SETTINGS, payload)
