@@ -6,6 +6,7 @@ one go ends; the pool's stops are no benchmark or suite stop; bad settings are o
 from __future__ import annotations
 
 import json
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -143,6 +144,17 @@ def test_population_forward_is_the_models_for_members_over_several_blocks(start)
         assert np.array_equal(got[:rows], want[:rows])
         assert np.array_equal(got[2 * rows : n], want[2 * rows : n])
         assert not np.array_equal(got[rows : 2 * rows], want[rows : 2 * rows])
+        # rows whose stops ended (as the runner's frozen environments): a block of them all is
+        # skipped (zeros), every other row's action is unchanged, bit for bit
+        stopped = np.zeros(n, dtype=bool)
+        stopped[:rows] = True  # member 0 ended: its blocks and the batch's first block(s)
+        stopped[rows + 1] = True  # one row of member 1: its block still runs
+        pop._sim = SimpleNamespace(n_envs=n, stopped=stopped)
+        part = pop._forward(x)
+        live = np.flatnonzero(~stopped)
+        assert np.array_equal(part[live], got[live])
+        assert np.array_equal(part[rows + 1], got[rows + 1])  # in a block that ran
+        assert not part[:64].any()  # the first block's rows all ended: skipped
 
 
 def test_a_discrete_start_is_refused():

@@ -232,3 +232,20 @@ def test_selection_suites_share_nothing_with_the_judging_suites(chosen_on, judge
     assert not set(chosen.seeds) & set(judged.seeds)
     assert not {c.name for c in chosen.cases} & {c.name for c in judged.cases}
     assert not levels(chosen) & levels(judged)
+
+
+def test_dry_references_of_repeated_stops_are_each_stops_own():
+    """A stop repeated in one batch (the fine-tune runs each stop once a member) is simulated
+    once on dry rail; every copy gets the distance its stop gets alone, exactly."""
+    from wsp_env.core.config import load_rails
+    from wsp_env.core.simulator import RunSetup
+    from wsp_env.evaluation.reference import dry_reference_distances
+
+    veh, rails = load_vehicle("uic_z1"), load_rails()
+    a = RunSetup(speed_kmh=120.0, rail=rails["soap"], gradient_permille=-10.0)
+    b = RunSetup(speed_kmh=80.0, rail=rails["leaves"], load_factor=1.1)
+    c = dataclasses.replace(a, rail=rails["oil"], mu_contaminated=0.05)  # a's dry stop
+    alone = [dry_reference_distances(veh, [s], rails["dry"], max_time_s=120.0)[0] for s in (a, b)]
+    both = dry_reference_distances(veh, [a, b, a, c, b], rails["dry"], max_time_s=120.0)
+    assert both.tolist() == [alone[0], alone[1], alone[0], alone[0], alone[1]]
+    assert alone[0] != alone[1]

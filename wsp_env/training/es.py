@@ -244,20 +244,40 @@ class PopulationPolicy(SB3Policy):
                 "environments"
             )
         super().bind(core)
+        self._sim = core.sim
+
+    def _live(self, n: int) -> np.ndarray:
+        """Which of ``n`` rows still run: an environment at standstill or frozen by the runner
+        at its stop's end (``sim.stopped``) is left unchanged by later steps, so its actions
+        change nothing; padding rows are not live. All rows before ``bind``."""
+        sim = getattr(self, "_sim", None)
+        if sim is None:
+            return np.ones(n, dtype=bool)
+        live = np.zeros(n, dtype=bool)
+        live[: sim.n_envs] = ~sim.stopped
+        return live
 
     def _forward(self, x: np.ndarray) -> np.ndarray:
         """As ``SB3Policy._forward``, bit for bit where a member holds the model's own weights:
         every product on blocks of ``INFERENCE_BLOCK`` rows (torch picks its code path by the
-        batch's size), the shared layers on the batch's blocks, each member's on its own rows'."""
+        batch's size), the shared layers on the batch's blocks, each member's on its own rows'.
+        A block whose rows have all ended is skipped (zeros: ``_live``), which changes no live
+        row's action, as every block is computed on its own."""
         import torch
         import torch.nn.functional as F
 
         block = INFERENCE_BLOCK
+        live = self._live(x.shape[0])
+        width = self._shared[-1].out_features if self._shared else x.shape[1]
+        n_out = int(self._weights[-1][1].shape[1])
         with torch.no_grad():
             h = torch.as_tensor(x, dtype=torch.float32)
             parts = []
             for b in range(0, h.shape[0], block):
                 hb = h[b : b + block]
+                if not live[b : b + block].any():
+                    parts.append(hb.new_zeros((hb.shape[0], width)))
+                    continue
                 for lin in self._shared:
                     hb = self._act(lin(hb))
                 parts.append(hb)
@@ -266,15 +286,20 @@ class PopulationPolicy(SB3Policy):
             out = []
             for j in range(self._members):
                 hm = h[j * rows : (j + 1) * rows]
+                live_m = live[j * rows : (j + 1) * rows]
                 if pad:
                     hm = torch.cat([hm, hm.new_zeros((pad, hm.shape[1]))])
                 for b in range(0, rows + pad, block):
+                    keep = max(0, min(block, rows - b))
+                    if not live_m[b : b + block].any():
+                        out.append(h.new_zeros((keep, n_out)))
+                        continue
                     hb = hm[b : b + block]
                     for k, (w, bias) in enumerate(self._weights):
                         hb = F.linear(hb, w[j], bias[j])
                         if k < self._n_moving - 1:
                             hb = self._act(hb)
-                    out.append(hb[: max(0, min(block, rows - b))])
+                    out.append(hb[:keep])
             act = torch.cat(out).numpy()
         act = np.clip(act, self._low, self._high)
         return np.concatenate([act, np.zeros((x.shape[0] - act.shape[0], act.shape[1]), act.dtype)])
