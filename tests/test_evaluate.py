@@ -234,18 +234,21 @@ def test_selection_suites_share_nothing_with_the_judging_suites(chosen_on, judge
     assert not levels(chosen) & levels(judged)
 
 
-def test_dry_references_of_repeated_stops_are_each_stops_own():
-    """A stop repeated in one batch (the fine-tune runs each stop once a member) is simulated
-    once on dry rail; every copy gets the distance its stop gets alone, exactly."""
-    from wsp_env.core.config import load_rails
-    from wsp_env.core.simulator import RunSetup
-    from wsp_env.evaluation.reference import dry_reference_distances
+def test_references_of_a_repeated_run_are_its_own_alone():
+    """A run repeated in one batch (the fine-tune runs each stop once a member) has its
+    references computed once; every copy gets what the run gets alone, exactly."""
+    from wsp_env.evaluation.runner import run_runs
+    from wsp_env.evaluation.suites import expand
 
-    veh, rails = load_vehicle("uic_z1"), load_rails()
-    a = RunSetup(speed_kmh=120.0, rail=rails["soap"], gradient_permille=-10.0)
-    b = RunSetup(speed_kmh=80.0, rail=rails["leaves"], load_factor=1.1)
-    c = dataclasses.replace(a, rail=rails["oil"], mu_contaminated=0.05)  # a's dry stop
-    alone = [dry_reference_distances(veh, [s], rails["dry"], max_time_s=120.0)[0] for s in (a, b)]
-    both = dry_reference_distances(veh, [a, b, a, c, b], rails["dry"], max_time_s=120.0)
-    assert both.tolist() == [alone[0], alone[1], alone[0], alone[0], alone[1]]
+    veh = load_vehicle("uic_z1")
+    runs = expand(load_suite("quick"), veh)
+    a, b = runs[0], runs[-1]
+    keys = ("reference_distance_m", "dry_reference_distance_m", "equivalent_build_up_time_s")
+
+    def refs(batch):
+        res, _ = run_runs(veh, batch, NoWSP(), max_time_s=2.0)
+        return [tuple(r[k] for k in keys) for r in res]
+
+    alone = refs([a]) + refs([b])
     assert alone[0] != alone[1]
+    assert refs([a, b, a, b, a]) == [alone[0], alone[1], alone[0], alone[1], alone[0]]

@@ -104,28 +104,16 @@ def dry_reference_distances(
     control_period_s: float = 0.02,
     max_time_s: float = 600.0,
 ) -> np.ndarray:
-    """Stopping distance (m) of each run's stop on dry rail, full demand on every axle. Runs
-    whose dry stops are the same (the same stop run by several policies in one batch: the
-    fine-tune's members) are simulated once; each environment's arithmetic is its own, so the
-    distances are those of one environment a run."""
+    """Stopping distance (m) of each run's stop on dry rail, full demand on every axle."""
     from wsp_env.core.simulator import TrainSim
 
-    unique: dict[tuple, int] = {}
-    dry_setups, index = [], []
-    for setup in setups:
+    sim = TrainSim(vehicle, n_envs=len(setups), dt_s=dt_s, control_period_s=control_period_s)
+    for e, setup in enumerate(setups):
         dry = dataclasses.replace(
             setup, rail=dry_rail, rail_name="dry", mu_contaminated=None, background=None,
             sections=(), injection_level=0.0, injection_until_s=-1.0, axle_mu_factor=None,
             recovery_basis=None,
         )  # fmt: skip
-        # every field but the rail, which is dry_rail for all (and holds a dict)
-        key = tuple(getattr(dry, f.name) for f in dataclasses.fields(dry) if f.name != "rail")
-        if key not in unique:
-            unique[key] = len(dry_setups)
-            dry_setups.append(dry)
-        index.append(unique[key])
-    sim = TrainSim(vehicle, n_envs=len(dry_setups), dt_s=dt_s, control_period_s=control_period_s)
-    for e, dry in enumerate(dry_setups):
         sim.configure(e, dry)
     sim.reset()
     full = np.ones((sim.n_envs, sim.n_axles))
@@ -133,4 +121,4 @@ def dry_reference_distances(
         if sim.stopped.all():
             break
         sim.step(full)
-    return sim.position_m[np.array(index, dtype=np.int64)].copy()
+    return sim.position_m.copy()

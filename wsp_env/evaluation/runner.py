@@ -146,7 +146,7 @@ def run_runs(
     core = make_core(len(runs), vehicle=vehicle, max_time_s=max_time_s, **kwargs)
     for e, run in enumerate(runs):
         core.reset_env(e, run.options, seed=run.seed)
-    refs = _references(core, max_time_s)
+    refs = _references(core, runs, max_time_s)
     policy.bind(core)
     policy.reset(np.arange(len(runs)))
     ref_sq = np.zeros(len(runs))  # integral of (v_ref - V)^2 dt: the shared reference's error
@@ -198,22 +198,32 @@ def run_runs(
     return [r for r in results if r is not None], records
 
 
-def _references(core: BrakingCore, max_time_s: float) -> list[tuple[float, float, float, float]]:
+def _references(
+    core: BrakingCore, runs: list[Run], max_time_s: float
+) -> list[tuple[float, float, float, float]]:
     """Per env, what its stop is judged against: the distance the adhesion present allows,
-    the same stop on dry rail, the equivalent build-up time and the initial speed."""
+    the same stop on dry rail, the equivalent build-up time and the initial speed. A run
+    repeated in the batch (the same seed and options: the same stop, as the fine-tune runs each
+    stop once a member) is computed once and shared."""
     sim = core.sim
     p = core.params
-    available = [
-        reference_distance(p.env_par, p.axle_par, p.sections, e, sim.speed_mps[e])
-        for e in range(core.n_envs)
-    ]
+    first: dict[tuple[int, str], int] = {}
+    rep = [first.setdefault((run.seed, repr(sorted(run.options.items()))), e)
+           for e, run in enumerate(runs)]  # fmt: skip
+    distinct = sorted(first.values())
+    available = {
+        e: reference_distance(p.env_par, p.axle_par, p.sections, e, sim.speed_mps[e])
+        for e in distinct
+    }
     dry_rail = core.rails.get("dry") or load_rails()["dry"]
-    dry = dry_reference_distances(
-        core.vehicle, list(sim.setups), dry_rail, sim.dt_s, sim.control_period_s, max_time_s
+    setups = [sim.setups[e] for e in distinct]
+    dry_m = dry_reference_distances(
+        core.vehicle, setups, dry_rail, sim.dt_s, sim.control_period_s, max_time_s
     )
+    dry = dict(zip(distinct, dry_m, strict=True))
     t_e = equivalent_build_up_time_s(p.env_par)
     v0 = sim.speed_mps.copy()
-    return [(available[e], dry[e], t_e[e], v0[e]) for e in range(core.n_envs)]
+    return [(available[rep[e]], dry[rep[e]], t_e[e], v0[e]) for e in range(core.n_envs)]
 
 
 def _run_result(
