@@ -155,6 +155,14 @@ def test_population_forward_is_the_models_for_members_over_several_blocks(start)
         assert np.array_equal(part[live], got[live])
         assert np.array_equal(part[rows + 1], got[rows + 1])  # in a block that ran
         assert not part[:64].any()  # the first block's rows all ended: skipped
+        if rows == 100:  # a member's block beside zeros of a skipped shared block
+            stopped = np.zeros(n, dtype=bool)
+            stopped[192:] = True  # shared blocks 3, 4 skipped; 192-199 ended in a block that runs
+            pop._sim = SimpleNamespace(n_envs=n, stopped=stopped)
+            part = pop._forward(x)
+            assert np.array_equal(part[:192], got[:192])  # live rows beside skipped ones
+            assert not part[200:n].any()  # member 2: every row ended, its blocks skipped
+        pop._sim = None
 
 
 def test_a_discrete_start_is_refused():
@@ -222,6 +230,63 @@ def test_averaged_and_guarded_fine_tune_resumes_and_writes_the_average(start, tm
     hist = json.loads((tmp_path / "one" / es.HISTORY).read_text())
     assert all(0 <= r["members_guarded"] <= 2 for r in hist) and one["generations"] == 3
     assert hist[0]["current_guarded"] is False  # generation 0's current is the start
+
+
+def _scripted(monkeypatch, out, member_s, calls):
+    """``evaluate_population`` replaced by scripted normalised returns: the start and the
+    current weights 1.0 on every stop, the members ``member_s`` (one row a member, + then -);
+    the ``thetas`` it was given kept in ``calls``."""
+
+    def fake(start, thetas, seeds, n_layers):
+        pool = json.loads((out / es.POOL).read_text())
+        i = [s - es.TRAINING_SEED_BASE for s in seeds]
+        r0, r1 = np.array(pool["r_none"])[i], np.array(pool["r_classical"])[i]
+        s = np.vstack([np.ones((2, len(seeds))), np.asarray(member_s, dtype=float)])
+        calls.append(thetas.copy())
+        return r0 + s * (r1 - r0), np.zeros(s.shape, dtype=bool)
+
+    monkeypatch.setattr(es, "evaluate_population", fake)
+
+
+def test_the_guard_turns_the_step_away_from_a_member_that_loses_a_stop(start, tmp_path):
+    """One pair: the + member scores higher (the mean of 1.5 and 0.5 against 0.95) but loses
+    0.5 on a stop. Without the guard the step goes its way; with a guard of 0.2, the other."""
+    pool = tmp_path / "pool.json"
+    _finetune(start, tmp_path / "p", 0)
+    pool.write_text((tmp_path / "p" / es.POOL).read_text())
+    moved = {}
+    for guard in (0.0, 0.2):
+        out = tmp_path / f"g{guard}"
+        out.mkdir()
+        (out / es.POOL).write_text(pool.read_text())
+        calls = []
+        with pytest.MonkeyPatch.context() as mp:
+            _scripted(mp, out, [[1.5, 0.5], [0.95, 0.95]], calls)
+            _finetune(start, out, 1, guard=guard)
+        theta = calls[0][1]
+        eps = calls[0][2] - theta
+        moved[guard] = float((np.load(out / es.STATE)["theta"] - theta) @ eps)
+        hist = json.loads((out / es.HISTORY).read_text())
+        assert hist[0]["members_guarded"] == (1 if guard else 0)
+    assert moved[0.0] > 0 > moved[0.2]
+
+
+def test_the_current_member_is_the_average_of_the_steps_taken(start, tmp_path, monkeypatch):
+    """Each generation's row 1 (scored as "current") is the bias-corrected exponential
+    average of the steps taken so far, computed here from the members' centres."""
+    _finetune(start, tmp_path / "p", 0)  # the pool, copied below
+    calls = []
+    out = tmp_path / "avg"
+    out.mkdir()
+    (out / es.POOL).write_text((tmp_path / "p" / es.POOL).read_text())
+    _scripted(monkeypatch, out, [[1.2, 1.1], [0.9, 1.0]], calls)
+    _finetune(start, out, 3, average=0.5)
+    steps = [c[2:].mean(axis=0) for c in calls]  # generation g's centre: the g-th step
+    assert np.allclose(calls[0][1], calls[0][0])  # no step yet: the start
+    assert np.allclose(calls[1][1], steps[1], atol=1e-12)
+    want = (0.25 * steps[1] + 0.5 * steps[2]) / 0.75
+    assert np.allclose(calls[2][1], want, atol=1e-12)
+    assert not np.allclose(calls[2][1], steps[2])
 
 
 def test_the_average_is_bias_corrected_and_the_guard_names_tail_losses_and_new_watchdogs():

@@ -723,7 +723,7 @@ def _add_finetune(sub: argparse._SubParsersAction) -> None:
         ("--layers", int, "the actor's last layers that move"),
         ("--seed", _seed, "the draws' seed"),
         ("--average", float, "decay of the written weights' running average (0: last step's)"),
-        ("--guard", float, "a member losing this much on any stop ranks last (0: off)"),
+        ("--guard", float, "a member losing more than this on any stop ranks last (0: off)"),
     ):
         name = flag[2:].replace("-", "_")
         p.add_argument(flag, type=kind, default=None,

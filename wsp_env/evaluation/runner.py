@@ -10,6 +10,7 @@ comparison), and ``trace_metadata`` describes such a run as a ``wsp-trace/1`` tr
 from __future__ import annotations
 
 import math
+import pickle
 import statistics
 from typing import Any
 
@@ -207,9 +208,8 @@ def _references(
     stop once a member) is computed once and shared."""
     sim = core.sim
     p = core.params
-    first: dict[tuple[int, str], int] = {}
-    rep = [first.setdefault((run.seed, repr(sorted(run.options.items()))), e)
-           for e, run in enumerate(runs)]  # fmt: skip
+    first: dict[tuple[int, bytes] | int, int] = {}
+    rep = [first.setdefault(_run_key(run, e), e) for e, run in enumerate(runs)]
     distinct = sorted(first.values())
     available = {
         e: reference_distance(p.env_par, p.axle_par, p.sections, e, sim.speed_mps[e])
@@ -224,6 +224,18 @@ def _references(
     t_e = equivalent_build_up_time_s(p.env_par)
     v0 = sim.speed_mps.copy()
     return [(available[rep[e]], dry[rep[e]], t_e[e], v0[e]) for e in range(core.n_envs)]
+
+
+def _run_key(run: Run, e: int) -> tuple[int, bytes] | int:
+    """What makes two runs the same stop: the seed and the options (pickled: every value in
+    full; options in another order only miss a share). A run without a whole-number seed or
+    with options that cannot be pickled is its own (``e``)."""
+    if isinstance(run.seed, bool) or not isinstance(run.seed, (int, np.integer)):
+        return e
+    try:
+        return int(run.seed), pickle.dumps(sorted(run.options.items()))
+    except Exception:  # an option pickle cannot write: no sharing
+        return e
 
 
 def _run_result(

@@ -79,8 +79,8 @@ HISTORY = "history.json"
 
 @dataclass(frozen=True)
 class ESSettings:
-    """A fine-tune's settings (``es.json``; the run in docs/training.md changed only
-    ``learning_rate``, to 0.003).
+    """A fine-tune's settings (``es.json``; docs/training.md's first run changed only
+    ``learning_rate``, to 0.003; its second also ``average`` to 0.9 and ``guard`` to 0.2).
 
     ============================  =======  ==================================================
     field                         default  meaning
@@ -94,11 +94,11 @@ class ESSettings:
     ``seed``                      0        every draw comes from ``(seed, generation)``
     ``average``                   0.0      decay of the weights' running average, which is
                                            scored as "current" and written (0: the last step's)
-    ``guard``                     0.0      > 0: a member that returns ``guard`` (in the score's
-                                           units) less than the start on any stop of its
-                                           generation, or brings the watchdog where the
-                                           start ran without it, ranks below every member that
-                                           does neither (0: no guard)
+    ``guard``                     0.0      > 0: a member that returns more than ``guard`` (in
+                                           the score's units) less than the start on any
+                                           stop of its generation, or brings the watchdog
+                                           where the start ran without it, ranks below every
+                                           member that does neither (0: no guard)
     ============================  =======  ==================================================
 
     ``average`` is Polyak-Ruppert averaging (Polyak & Juditsky 1992, SIAM J. Control Optim.
@@ -247,9 +247,11 @@ class PopulationPolicy(SB3Policy):
         self._sim = core.sim
 
     def _live(self, n: int) -> np.ndarray:
-        """Which of ``n`` rows still run: an environment at standstill or frozen by the runner
-        at its stop's end (``sim.stopped``) is left unchanged by later steps, so its actions
-        change nothing; padding rows are not live. All rows before ``bind``."""
+        """Which of ``n`` rows still run: under ``runner.run_runs`` (the only runner of a
+        population) an environment at standstill or frozen at its stop's end (``sim.stopped``)
+        was scored in the step it ended and is never read again, so its actions change nothing
+        (the kernel still takes them in); padding rows are not live. All rows before
+        ``bind``."""
         sim = getattr(self, "_sim", None)
         if sim is None:
             return np.ones(n, dtype=bool)
@@ -261,8 +263,10 @@ class PopulationPolicy(SB3Policy):
         """As ``SB3Policy._forward``, bit for bit where a member holds the model's own weights:
         every product on blocks of ``INFERENCE_BLOCK`` rows (torch picks its code path by the
         batch's size), the shared layers on the batch's blocks, each member's on its own rows'.
-        A block whose rows have all ended is skipped (zeros: ``_live``), which changes no live
-        row's action, as every block is computed on its own."""
+        A block whose rows have all ended is skipped (zeros: ``_live``). No live row's action
+        changes: each block is its own product of the same size as before, and a row of a
+        product does not depend on the other rows' values (a member's block may hold zeros
+        from a skipped shared block beside live rows; tested)."""
         import torch
         import torch.nn.functional as F
 
@@ -389,8 +393,9 @@ def _read_json(path: Path, what: str) -> Any:
 
 def _read_state(path: Path, size: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, int,
                                                np.ndarray]:  # fmt: skip
-    """The saved weights, Adam's moments, the generations done and the weights' running sum
-    (zeros in a state from before ``average``), or one line naming the file."""
+    """The saved weights, Adam's moments, the generations done and the weights' zero-started
+    running average (zeros in a state from before ``average``), or one line naming the
+    file."""
     try:
         with np.load(path) as st:
             theta, m, v, done = st["theta"], st["m"], st["v"], int(st["generation"])
@@ -568,7 +573,7 @@ def _finetune(
         fitness = iqm(s, axis=1)
         failed = guarded(s, watchdog, settings.guard)  # rows 1..: current, then the members
         # the guard's failures below every other member, in their own order among themselves
-        u = centred_ranks(fitness[2:] - np.where(failed[1:], 1e6, 0.0))
+        u = centred_ranks(fitness[2:] - failed[1:] * (np.ptp(fitness[2:]) + 1.0))
         k = settings.pairs
         grad = (u[:k] - u[k:]) @ eps / (2 * k * settings.sigma)
         # Adam, ascending the fitness
@@ -624,6 +629,7 @@ def _finetune(
         "wall_time_s_this_call": round(time.time() - t0, 1),
         "wall_time_s": round(sum(r["wall_s"] for r in history), 1),
         "parameters": int(theta.size),
+        # the written weights' (history's rows give the last step's)
         "distance_from_start": float(np.linalg.norm(final - theta0)),
         "last": history[-1] if history else None,
     }
