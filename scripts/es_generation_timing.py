@@ -39,7 +39,10 @@ def main(argv: list[str] | None = None) -> int:
     layers, _ = es.actor_layers(SB3Policy(args.start).model)
     theta = es.get_parameters(layers[-1:])
     eps = np.random.default_rng(1).standard_normal((6, theta.size))
-    thetas = np.concatenate([theta[None], theta[None], theta + 0.01 * eps, theta - 0.01 * eps])
+    if hasattr(es, "population"):
+        thetas = es.population(theta, theta, theta, 0.01 * eps)
+    else:  # the code before 2026-11-26 had no helper; the same members
+        thetas = np.concatenate([theta[None], theta[None], theta + 0.01 * eps, theta - 0.01 * eps])
     with applied(thread_policy("evaluate")):
         es.evaluate_population(args.start, thetas[:2], seeds[:2], 1)  # compile, warm up
         t = time.perf_counter()

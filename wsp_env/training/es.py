@@ -236,6 +236,7 @@ class PopulationPolicy(SB3Policy):
             raise ValueError(f"parameters: {thetas.shape[1]} a member for layers holding {i}")
         space = self.model.action_space
         self._low, self._high = space.low, space.high
+        self._sim: Any = None  # the bound core's simulator (``_live``)
 
     def bind(self, core: Any) -> None:
         if core.n_envs != self._members * self._rows:
@@ -252,7 +253,7 @@ class PopulationPolicy(SB3Policy):
         was scored in the step it ended and is never read again, so its actions change nothing
         (the kernel still takes them in); padding rows are not live. All rows before
         ``bind``."""
-        sim = getattr(self, "_sim", None)
+        sim = self._sim
         if sim is None:
             return np.ones(n, dtype=bool)
         live = np.zeros(n, dtype=bool)
@@ -307,6 +308,13 @@ class PopulationPolicy(SB3Policy):
             act = torch.cat(out).numpy()
         act = np.clip(act, self._low, self._high)
         return np.concatenate([act, np.zeros((x.shape[0] - act.shape[0], act.shape[1]), act.dtype)])
+
+
+def population(start: np.ndarray, current: np.ndarray, theta: np.ndarray,
+               steps: np.ndarray) -> np.ndarray:  # fmt: skip
+    """A generation's members in their order: the start, the current weights, then
+    ``theta + steps`` and ``theta - steps`` (one antithetic pair a row of ``steps``)."""
+    return np.concatenate([start[None], current[None], theta + steps, theta - steps])
 
 
 def centred_ranks(x: np.ndarray) -> np.ndarray:
@@ -563,10 +571,7 @@ def _finetune(
         pick = np.sort(rng.choice(scored, size=settings.stops, replace=False))
         eps = rng.standard_normal((settings.pairs, theta.size))
         current = averaged(theta, total, settings.average, g)
-        thetas = np.concatenate(
-            [theta0[None], current[None], theta + settings.sigma * eps,
-             theta - settings.sigma * eps]
-        )  # fmt: skip
+        thetas = population(theta0, current, theta, settings.sigma * eps)
         returns, watchdog = evaluate_population(start_path, thetas, [int(s) for s in seeds[pick]],
                                                 settings.layers)  # fmt: skip
         s, _ = normalised(returns, r_none[pick], r_cls[pick])  # every picked stop is scored
