@@ -77,7 +77,8 @@ def score_table(payload: dict[str, Any]) -> str:
         f"**{payload['benchmark']}** ({payload['runs']} stops of the sealed set):",
         "",
         "| policy | score (IQM) | 95 % interval | mean normalised score | stop / classical: mean "
-        "| worst | pass rate | watchdog interventions (stops) | reference error RMS [km/h] |",
+        "| worst | pass rate | watchdog interventions (stops; the override gave way) "
+        "| reference error RMS [km/h] |",
         "|---|---|---|---|---|---|---|---|---|",
     ]
     for name, p in payload["policies"].items():
@@ -86,7 +87,8 @@ def score_table(payload: dict[str, Any]) -> str:
             f"| {name} | {p['score']:.3f} | {ci} | {p['score_mean']:.2f} | "
             f"{p['stop_ratio_mean']:.3f} | "
             f"{p['stop_ratio_worst']:.2f} | {100 * p['pass_rate']:.0f} % | "
-            f"{p['watchdog_interventions']} ({p['watchdog_runs']}) | "
+            f"{p['watchdog_interventions']} ({p['watchdog_runs']}; "
+            f"{p.get('watchdog_gave_way_runs', '-')}) | "
             f"{p['reference_error_rms_kmh_mean']:.2f} |"
         )
     oracle = payload["policies"].get("oracle", {}).get("beaten_by")

@@ -14,7 +14,7 @@ import pytest
 from wsp_env import BENCHMARK_VEHICLES
 from wsp_env.cli import main
 from wsp_env.core.config import configs_root, load_vehicle
-from wsp_env.envs.tiers import benchmark_env_kwargs, env_id
+from wsp_env.envs.tiers import VERSION, VERSIONS, benchmark_env_kwargs, env_id, ids
 from wsp_env.evaluation import expand, load_suite
 from wsp_env.evaluation.benchmark import (
     SEALED_RUNS,
@@ -129,19 +129,39 @@ def test_registered_ids_fix_vehicle_tier_and_distribution():
     for vehicle in BENCHMARK_VEHICLES:
         load_vehicle(vehicle)  # every id names a vehicle of configs/vehicles
     assert {p.stem for p in (configs_root() / "vehicles").glob("*.yaml")} == set(BENCHMARK_VEHICLES)
-    env = gym.make("WSPBraking-UICZ1-Accel-v1")
+    env = gym.make("WSPBraking-UICZ1-Accel-v2")
     core = env.unwrapped.core
     assert core.accelerometer and core.sensors.accelerometer_bias_mps2 == 0.3
     assert core.scenario.gradient_permille == (-25.0, 25.0) and core.watchdog.enabled
     assert env.observation_space.shape == (24,)
-    venv = gym.make_vec("WSPBraking-ETR1000-v1", num_envs=3)
+    venv = gym.make_vec("WSPBraking-ETR1000-v2", num_envs=3)
     assert not venv.unwrapped.core.accelerometer and venv.unwrapped.core.vehicle.id == "etr1000"
-    assert env_id("regiolis", "wheels+accel") == "WSPBraking-Regiolis-Accel-v1"
+    assert env_id("regiolis", "wheels+accel") == "WSPBraking-Regiolis-Accel-v2"
     obs, _ = venv.reset(seed=0)
     assert obs.shape[0] == 3
     for bad in ({"vehicle": "etr1000"}, {"max_time_s": 5.0}, {"tier": "wheels"}):
         with pytest.raises(ValueError, match="fixes every setting"):
-            gym.make("WSPBraking-UICZ1-v1", **bad)
+            gym.make("WSPBraking-UICZ1-v2", **bad)
+
+
+def test_every_version_of_the_ids_stays_registered_and_differs_only_where_its_history_says():
+    """The package registers exactly ``tiers.ids()`` (every vehicle, tier and version); ``-v1``
+    is ``-v2`` with the watchdog's override standing to standstill (``give_way_locked_s`` 0),
+    every other setting equal; the benchmark scores the current version."""
+    from gymnasium.envs.registration import registry
+
+    registered = {i for i in registry if i.startswith("WSPBraking-") and i != "WSPBraking-v0"}
+    assert registered == set(ids()) and len(registered) == 2 * 2 * len(BENCHMARK_VEHICLES)
+    assert VERSION == VERSIONS[-1] == "v2" and env_id("uic_z1", "wheels").endswith("-v2")
+    old, new = (benchmark_env_kwargs("uic_z1", "wheels", v) for v in ("v1", "v2"))
+    assert old.pop("watchdog") == {"give_way_locked_s": 0.0} and new.pop("watchdog") is None
+    assert old == new
+    with pytest.warns(Warning, match="out of date"):
+        v1 = gym.make("WSPBraking-UICZ1-v1")
+    assert v1.unwrapped.core.watchdog.give_way_locked_s == 0.0
+    assert gym.make("WSPBraking-UICZ1-v2").unwrapped.core.watchdog.give_way_locked_s == 0.2
+    with pytest.raises(ValueError, match="version"):
+        env_id("uic_z1", "wheels", "v3")
 
 
 class _Half:
@@ -203,7 +223,8 @@ def test_benchmark_runs_policies_through_one_path_and_refuses_a_foreign_tier(
     assert pols["half"]["score"] < 1.0 and pols["half"]["stop_ratio_mean"] > 1.0
     assert set(pols["half"]["families"]) == {"rail", "gradient", "speed"}
     assert "watchdog_interventions" in pols["half"]
-    assert (tmp_path / "rep" / "report.md").read_text().startswith("# WSPBraking-UICZ1-v1")
+    assert 0 <= pols["half"]["watchdog_gave_way_runs"] <= pols["half"]["watchdog_runs"]
+    assert (tmp_path / "rep" / "report.md").read_text().startswith("# WSPBraking-UICZ1-v2")
 
     accel = _Half()
     accel.env_kwargs = {"accelerometer": True}  # as a model trained with one says

@@ -11,6 +11,7 @@ from wsp_env.core import kernel as K
 from wsp_env.core.config import ConfigError
 from wsp_env.envs import WSPBrakingVectorEnv
 from wsp_env.evaluation.runner import run_one
+from wsp_env.physics.integrator import LOCK_TRAIN_SPEED, LOCK_WHEEL_SPEED
 from wsp_env.policy import NoWSP
 
 LEVEL_DRY = {"rail": "dry", "speed_kmh": 100.0, "pattern": "uniform", "gradient_permille": 0.0,
@@ -150,21 +151,124 @@ class _Vent:
                                                  ("dry", 120.0, 0.0)])  # fmt: skip
 def test_the_watchdog_stops_a_policy_that_vents_forever(rail, speed, gradient):
     """Without the watchdog a vent-forever stop runs for kilometres; with it, the minimum-
-    deceleration supervision restores the demand, and the stop is the locked-wheel stop plus
-    at most the distance run at the initial speed while the supervision waits (the demand's
-    build-up, its 3 s and the filter's 2 x 1 s). (On leaves at -20 per mille nothing stops the
-    train soon, locked wheels included: the bound holds, the contrast does not.)"""
-    case = {"gradient_permille": gradient, "mu_contaminated": None}
-    case = {k: v for k, v in case.items() if v is not None}
+    deceleration supervision restores the demand. Where the full demand does not lock every
+    axle (dry) it stands to standstill, and the stop is the locked-wheel stop plus at most the
+    distance run at the initial speed while the supervision waits (the demand's build-up, its
+    3 s and the filter's 2 x 1 s). Where it locks every axle (soap, leaves) it gives way, the
+    policy vents again, and the safety time restores every axle for good 10 s later: the bound
+    gains those 10 s at the initial speed. Without giving way (``give_way_locked_s`` 0, the
+    watchdog before 2026-11-27) the first bound holds on every rail. (On leaves at -20 per
+    mille nothing stops the train soon, locked wheels included: the bound holds, the contrast
+    does not.)"""
+    case = {"gradient_permille": gradient}
     locked, _ = run_one("uic_z1", rail, speed, NoWSP(), 3, case)
     vent, _ = run_one("uic_z1", rail, speed, _Vent(), 3, case)
+    stand, _ = run_one(
+        "uic_z1", rail, speed, _Vent(), 3, case, {"watchdog": {"give_way_locked_s": 0.0}}
+    )
     free, _ = run_one("uic_z1", rail, speed, _Vent(), 3, case, {"watchdog": {"enabled": False}})
     t_build = locked["equivalent_build_up_time_s"] * 2.0
     bound = locked["stopping_distance_m"] + speed / 3.6 * (t_build + 3.0 + 2.0)
-    assert vent["stopping_distance_m"] <= bound
+    assert stand["stopping_distance_m"] <= bound
+    assert stand["watchdog"]["min_deceleration"] == 1 and stand["watchdog"]["gave_way"] == 0
     assert vent["watchdog"]["min_deceleration"] == 1
+    if rail == "dry":
+        assert vent["watchdog"]["gave_way"] == 0
+        assert vent["stopping_distance_m"] == stand["stopping_distance_m"]
+    else:
+        assert vent["watchdog"]["gave_way"] == 1 and vent["watchdog"]["safety_time_axles"] == 4
+        assert vent["stopping_distance_m"] <= bound + speed / 3.6 * 10.0
     assert free["stopping_distance_m"] > 3.0 * vent["stopping_distance_m"]
     assert locked["watchdog"]["total"] == 0
+
+
+@pytest.mark.parametrize("give_way_s", [0.2, 0.0])
+def test_the_override_gives_way_once_every_axle_has_locked_under_it(give_way_s):
+    """A policy that vents on soap trips the minimum-deceleration supervision (6.3 s); its full
+    demand locks every axle while the train still runs at tens of km/h. With the default
+    ``give_way_locked_s`` the override ends after every axle has read locked against the shared
+    reference for longer than 0.2 s: the valves obey the policy again at once, and the
+    supervision does not trip a second time although the policy withholds the brakes again.
+    With 0 the full demand stands to the end of the stop, the axles locked."""
+    venv = WSPBrakingVectorEnv(num_envs=1, watchdog={"give_way_locked_s": give_way_s})
+    venv.reset(seed=3, options={"rail": "soap", "speed_kmh": 100.0, "pattern": "uniform",
+                                "gradient_permille": 0.0, "load_factor": 1.0})  # fmt: skip
+    core = venv.core
+    vent = -np.ones((1, 4), dtype=np.float32)
+    state, locked_for, gave_way_at, before = [], 0.0, None, 0.0
+    for step in range(1, 1500):
+        venv.step(vent)
+        override = core.wsp[0, K.W_OVERRIDE]  # after the period; its commands obeyed ``before``
+        if core.sim.speed_mps[0] < 2.0:
+            break
+        state.append(override)
+        wheels, v_ref = core.measured_wheel_speed_mps[0], core.wsp[0, K.W_VREF]
+        if before == 1.0:
+            np.testing.assert_array_equal(core.sim.cmd[0], 1.0)  # the full demand
+        elif before == 2.0 and step * 0.02 < gave_way_at + 9.9:  # before the safety time
+            np.testing.assert_array_equal(core.sim.cmd[0], 0.0)  # the policy's vent
+        before = override
+        if override == 1.0:
+            every = bool(np.all(wheels < LOCK_WHEEL_SPEED)) and v_ref > LOCK_TRAIN_SPEED
+            locked_for = locked_for + 0.02 if every else 0.0
+        elif override == 2.0:
+            if gave_way_at is None:
+                gave_way_at = step * 0.02
+                assert locked_for == pytest.approx(0.2, abs=0.021)  # locked 0.2 s and no longer
+                assert core.sim.speed_mps[0] > 10.0  # a real lock: the train runs on
+    state = np.array(state)
+    trip = int(np.argmax(state > 0.0))
+    assert 6.0 < (trip + 1) * 0.02 < 7.0
+    if give_way_s > 0.0:
+        assert gave_way_at is not None and gave_way_at < 6.3 + 3.0
+        assert np.all(state[state > 0.0][np.argmax(state[state > 0.0] == 2.0) :] == 2.0)
+    else:
+        assert gave_way_at is None and np.all(state[trip:] == 1.0)
+        assert np.all(core.sim.wheel_speed_mps[0] < LOCK_WHEEL_SPEED)
+
+
+def test_the_override_only_ever_trips_then_gives_way_after_a_lock_on_the_benchmark_stops():
+    """An invariant over 48 stops of the benchmark's distribution (every rail, gradients,
+    sensor errors) under actions that vent, hold and apply at random: each stop's override goes
+    0 -> 1 -> 2 and never back, and it gives way only after every axle has read locked against
+    the shared reference for more than ``give_way_locked_s`` (counted here from the readings,
+    independently of the kernel's timer). Some stops must trip and some give way, or the
+    invariant tests nothing."""
+    import gymnasium as gym
+
+    venv = gym.make_vec("WSPBraking-UICZ1-Accel-v2", num_envs=48)
+    venv.reset(seed=5)
+    core = venv.unwrapped.core
+    rng = np.random.default_rng(5)
+    before = np.zeros(48)
+    locked_for = np.zeros(48)
+    tripped = gave_way = 0
+    top = np.linspace(-0.7, 1.0, 48)[:, None]  # from mostly venting to anything
+
+    def draw() -> np.ndarray:
+        return rng.uniform(-1.0, top, (48, 4)).astype(np.float32)
+
+    action = draw()
+    for _ in range(2000):
+        if rng.random() < 0.005:  # a new random action every 4 s or so: long enough to matter
+            action = draw()
+        _, _, term, trunc, _ = venv.step(action)
+        now = core.wsp[:, K.W_OVERRIDE].copy()
+        done = term | trunc
+        locked = np.all(core.measured_wheel_speed_mps < LOCK_WHEEL_SPEED, axis=1) & (
+            core.wsp[:, K.W_VREF] > LOCK_TRAIN_SPEED
+        )
+        for e in np.flatnonzero(~done):
+            assert now[e] >= before[e] and now[e] - before[e] <= 1.0  # 0 -> 1 -> 2 only
+            if before[e] == 1.0 and now[e] == 2.0:
+                assert locked[e] and locked_for[e] + 0.02 > 0.2 - 1e-9
+                gave_way += 1
+            if before[e] == 0.0 and now[e] == 1.0:
+                tripped += 1
+        locked_for = np.where(locked & (before == 1.0), locked_for + 0.02, 0.0)
+        before = np.where(done, 0.0, now)
+        locked_for[done] = 0.0
+    assert tripped >= 3 and gave_way >= 1
 
 
 def test_the_watchdog_leaves_the_classical_wsp_alone_on_the_quick_suite():
@@ -187,6 +291,7 @@ def test_the_watchdog_leaves_the_classical_wsp_alone_on_the_quick_suite():
         ({"sensors": {"phonic_teeth": 80}}, "phonic_teeth"),
         ({"watchdog": {"safety_time_s": 0.0}}, "safety_time_s"),
         ({"watchdog": {"min_decel_mps2": -1.0}}, "min_decel_mps2"),
+        ({"watchdog": {"give_way_locked_s": -0.1}}, "give_way_locked_s"),
         ({"estimator": {"ref_adapt_margin": 0.5}}, "ref_adapt_margin"),
         ({"accelerometer_bias_mps2": -0.1}, "accelerometer_bias_mps2"),
     ],

@@ -206,8 +206,8 @@ def test_lowest_target_and_the_watchdog():
         env.step(low)
         if step == 250:  # 2.8 bar measured (one axle lower: a periodic release)
             assert env.core.sim.pressure_bar[0].max() > 2.0
-    assert env.core.watchdog_interventions(0) == {"safety_time_axles": 0,
-                                                  "min_deceleration": 0, "total": 0}  # fmt: skip
+    assert env.core.watchdog_interventions(0) == {"safety_time_axles": 0, "min_deceleration": 0,
+                                                  "gave_way": 0, "total": 0}  # fmt: skip
 
 
 def test_the_loop_never_reads_the_privileged_columns():

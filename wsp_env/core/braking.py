@@ -658,10 +658,13 @@ class BrakingCore:
 
     def watchdog_interventions(self, e: int) -> dict[str, int]:
         """What the safety watchdog did in env ``e``'s stop: the axles it restored after the
-        safety time, and whether the minimum-deceleration supervision overrode the releases."""
+        safety time, whether the minimum-deceleration supervision overrode the releases, and
+        whether that override gave way (every axle locked under it; ``WatchdogConfig``)."""
         axles = int((self.axle_wsp[e, :, K.AW_WD_RESTORED] > 0.0).sum())
         decel = int(self.wsp[e, K.W_OVERRIDE] > 0.0)
-        return {"safety_time_axles": axles, "min_deceleration": decel, "total": axles + decel}
+        gave_way = int(self.wsp[e, K.W_OVERRIDE] == 2.0)
+        return {"safety_time_axles": axles, "min_deceleration": decel, "gave_way": gave_way,
+                "total": axles + decel}  # fmt: skip
 
     # ---- a vehicle outside the kernel (hardware in the loop: the roller rig) ----------------
 

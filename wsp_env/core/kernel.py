@@ -119,7 +119,8 @@ OP_WD_DECEL_TAU = 17  # s: time constant of the measured deceleration it supervi
 OP_AGE_SCALE = 18  # s: the observed reference age is age / this
 OP_ACTIVE_SLIP = 19  # m/s: a wheel this far below the reference counts as working ...
 OP_ACTIVE_SLIP_REL = 20  # ... or this fraction of the reference, whichever is larger
-N_OP = 21
+OP_WD_GIVE_WAY_S = 21  # s: the override ends once every axle has been locked this long (0: never)
+N_OP = 22
 
 # per-env sensor parameters (``sensor_par``; drawn per stop, or fixed by reset options)
 SP_WHEEL_NOISE = 0  # m/s: standard deviation of a wheel-speed reading
@@ -139,9 +140,11 @@ W_AGE = 5  # s since the last anchor, counted once the WSP has acted since it
 W_WORKED = 6  # 1.0: the WSP has acted since the last anchor
 W_DECEL = 7  # m/s^2, the measured deceleration the watchdog supervises (filtered)
 W_LOW_FOR = 8  # s the measured deceleration has stayed below the floor
-W_OVERRIDE = 9  # 1.0 once the minimum-deceleration supervision has overridden the releases
+W_OVERRIDE = 9  # 1.0 once the minimum-deceleration supervision has overridden the releases;
+# 2.0 once that override has given way (every axle locked under it; no second trip)
 W_SPEED_F = 10  # m/s, the fastest wheel's speed, filtered (the supervision's input)
-N_W = 11
+W_LOCKED_FOR = 11  # s every axle has been locked while the override stands
+N_W = 12
 
 # per-axle sensor, estimator and watchdog state (``axle_wsp``)
 AW_WHEEL = 0  # m/s, the measured wheel speed
@@ -333,12 +336,13 @@ def update_reference(
 @njit(**INLINE_FLAGS)
 def watchdog_commands(e, cmd, wsp, axle_wsp, obs_par):
     """The safety watchdog's say over this period's valve commands: an axle it has restored,
-    or every axle once the minimum-deceleration supervision has tripped, gets the full demand
-    (until standstill), whatever the controller asked."""
+    or every axle while the minimum-deceleration supervision's override stands, gets the full
+    demand (until standstill, or until the override gives way), whatever the controller
+    asked."""
     if obs_par[OP_WD_ON] <= 0.0:
         return
     for k in range(cmd.shape[1]):
-        if axle_wsp[e, k, AW_WD_RESTORED] > 0.0 or wsp[e, W_OVERRIDE] > 0.0:
+        if axle_wsp[e, k, AW_WD_RESTORED] > 0.0 or wsp[e, W_OVERRIDE] == 1.0:
             cmd[e, k] = 1.0
 
 
@@ -357,7 +361,15 @@ def watchdog_update(e, cmd, axle_state, demand, full_demand, env_par, wsp, axle_
     what the brakes do, so a steep downhill on leaves does not trip it), below
     ``OP_WD_MIN_DECEL`` for ``OP_WD_MIN_DECEL_S`` while the full demand stands and every wheel
     grips (all within the estimator's working band of the fastest, so the fastest wheel is the
-    train) overrides every release: the brakes are being withheld, not the rail giving out."""
+    train) overrides every release: the brakes are being withheld, not the rail giving out.
+    **Giving way** (``OP_WD_GIVE_WAY_S``): once every axle's measured speed has been locked
+    (``integrator.is_locked``) against the shared reference for that long while the override
+    stands (long enough that the wheels' last readings at standstill, under a reference that
+    lags them, are not taken for a lock), the
+    full demand has shown that the rail, not the controller, was the limit — every axle sliding
+    together at a rail's limit looks like grip on the wheels alone — and on such a rail locked
+    wheels brake worse than any WSP (on a steep downhill they run away). The override ends and
+    does not trip again in the stop; the safety time still stands."""
     if obs_par[OP_WD_ON] <= 0.0:
         return
     n_axles = axle_wsp.shape[1]
@@ -394,8 +406,17 @@ def watchdog_update(e, cmd, axle_state, demand, full_demand, env_par, wsp, axle_
         wsp[e, W_LOW_FOR] += dt
     else:
         wsp[e, W_LOW_FOR] = 0.0
-    if wsp[e, W_LOW_FOR] > obs_par[OP_WD_MIN_DECEL_S]:
+    if wsp[e, W_LOW_FOR] > obs_par[OP_WD_MIN_DECEL_S] and wsp[e, W_OVERRIDE] == 0.0:
         wsp[e, W_OVERRIDE] = 1.0
+    elif wsp[e, W_OVERRIDE] == 1.0 and obs_par[OP_WD_GIVE_WAY_S] > 0.0:
+        v_ref = wsp[e, W_VREF]
+        every_axle_locked = True
+        for k in range(n_axles):
+            if not is_locked(axle_wsp[e, k, AW_WHEEL], v_ref):
+                every_axle_locked = False
+        wsp[e, W_LOCKED_FOR] = wsp[e, W_LOCKED_FOR] + dt if every_axle_locked else 0.0
+        if wsp[e, W_LOCKED_FOR] > obs_par[OP_WD_GIVE_WAY_S]:
+            wsp[e, W_OVERRIDE] = 2.0
 
 
 @njit(**KERNEL_FLAGS)
@@ -497,6 +518,7 @@ def reset_obs(
     wsp[e, W_DECEL] = 0.0
     wsp[e, W_LOW_FOR] = 0.0
     wsp[e, W_OVERRIDE] = 0.0
+    wsp[e, W_LOCKED_FOR] = 0.0
     wsp[e, W_SPEED_F] = fastest
     for j in range(prev_action.shape[1]):
         prev_action[e, j] = 1.0

@@ -115,6 +115,12 @@ class WatchdogConfig:
     min_decel_mps2: float = field(default=0.2, metadata={"ge": 0.0, "le": 5.0})
     min_decel_time_s: float = field(default=3.0, metadata={"gt": 0.0, "le": 60.0})
     decel_filter_s: float = field(default=1.0, metadata={"gt": 0.0, "le": 10.0})
+    # the supervision's override ends (for the rest of the stop) once every axle has been locked
+    # under it this long against the shared reference: the rail, not the controller, was the
+    # limit (kernel.watchdog_update). 0.2 s: longer than the wheels read zero at a standstill
+    # before the reference follows, short beside a lock's damage. 0: never, as before
+    # 2026-11-27 (the full demand until standstill however the axles lock)
+    give_way_locked_s: float = field(default=0.2, metadata={"ge": 0.0, "le": 10.0})
 
 
 def fill_obs_par(obs_par: np.ndarray, est: EstimatorConfig, wd: WatchdogConfig) -> None:
@@ -134,6 +140,7 @@ def fill_obs_par(obs_par: np.ndarray, est: EstimatorConfig, wd: WatchdogConfig) 
     obs_par[K.OP_WD_MIN_DECEL] = wd.min_decel_mps2
     obs_par[K.OP_WD_MIN_DECEL_S] = wd.min_decel_time_s
     obs_par[K.OP_WD_DECEL_TAU] = wd.decel_filter_s
+    obs_par[K.OP_WD_GIVE_WAY_S] = wd.give_way_locked_s
 
 
 def draw_sensors(

@@ -4,8 +4,11 @@ setting a benchmark score depends on (``wsp-env benchmark``; docs/benchmark.md).
 Two **sensor tiers**, each with its own frozen classical WSP (``baselines.classical``
 ``TIER_CONFIGS``); a controller is only ever compared with the classical WSP of its tier:
 
-* ``wheels`` — wheel-speed sensors only (``WSPBraking-UICZ1-v1``);
-* ``wheels+accel`` — plus a body accelerometer (``WSPBraking-UICZ1-Accel-v1``).
+* ``wheels`` — wheel-speed sensors only (``WSPBraking-UICZ1-v2``);
+* ``wheels+accel`` — plus a body accelerometer (``WSPBraking-UICZ1-Accel-v2``).
+
+Every earlier version stays registered and reproduces its results (``VERSION_WATCHDOG``: ``-v1``
+is ``-v2`` with the watchdog's minimum-deceleration override standing until standstill).
 
 What an id fixes (``benchmark_env_kwargs``): the vehicle; the sensor errors of the tier
 (``TIER_SENSORS``: wheel-speed resolution 0.02 km/h, noise sigma drawn per stop in 0-0.05 km/h
@@ -31,7 +34,12 @@ from wsp_env.core.sensors import SensorConfig
 from wsp_env.envs.wsp_braking import WSPBrakingEnv, WSPBrakingVectorEnv
 
 TIERS = ("wheels", "wheels+accel")
-VERSION = "v1"
+VERSION = "v2"  # the ids the benchmark scores; every earlier version stays registered
+# what each registered version sets apart from the current one (the environment docstring's
+# version history): v1 is v2 with the watchdog's minimum-deceleration override standing until
+# standstill however the axles lock under it
+VERSION_WATCHDOG: dict[str, dict[str, Any] | None] = {"v1": {"give_way_locked_s": 0.0}, "v2": None}
+VERSIONS = tuple(VERSION_WATCHDOG)
 
 _WHEELS = SensorConfig(
     wheel_speed_noise_kmh=(0.0, 0.05),
@@ -73,9 +81,17 @@ def check_tier(tier: str) -> str:
     return tier
 
 
-def benchmark_env_kwargs(vehicle: str, tier: str) -> dict[str, Any]:
-    """Every environment argument of the benchmark id of ``vehicle`` and ``tier``."""
+def check_version(version: str) -> str:
+    if version not in VERSIONS:
+        raise ValueError(f"version: {version!r} is not one of {', '.join(VERSIONS)}")
+    return version
+
+
+def benchmark_env_kwargs(vehicle: str, tier: str, version: str = VERSION) -> dict[str, Any]:
+    """Every environment argument of the benchmark id of ``vehicle``, ``tier`` and ``version``
+    (the current one by default)."""
     check_tier(tier)
+    check_version(version)
     if vehicle not in BENCHMARK_VEHICLES:
         raise ValueError(
             f"vehicle: {vehicle!r} has no benchmark id (known: {', '.join(BENCHMARK_VEHICLES)})"
@@ -85,7 +101,7 @@ def benchmark_env_kwargs(vehicle: str, tier: str) -> dict[str, Any]:
         "accelerometer": tier == "wheels+accel",
         "sensors": dataclasses.asdict(TIER_SENSORS[tier]),
         "estimator": None,
-        "watchdog": None,
+        "watchdog": VERSION_WATCHDOG[version],
         "reward": None,
         "scenario": dataclasses.asdict(BENCHMARK_SCENARIO),
         "control_period_s": 0.02,
@@ -94,11 +110,13 @@ def benchmark_env_kwargs(vehicle: str, tier: str) -> dict[str, Any]:
     }
 
 
-def env_id(vehicle: str, tier: str) -> str:
-    """``WSPBraking-UICZ1-v1`` (tier ``wheels``), ``-Accel-v1`` (tier ``wheels+accel``)."""
+def env_id(vehicle: str, tier: str, version: str = VERSION) -> str:
+    """``WSPBraking-UICZ1-v2`` (tier ``wheels``), ``-Accel-v2`` (tier ``wheels+accel``); an
+    earlier ``version`` names its id (``-v1``)."""
     check_tier(tier)
+    check_version(version)
     accel = "-Accel" if tier == "wheels+accel" else ""
-    return f"WSPBraking-{BENCHMARK_VEHICLES[vehicle]}{accel}-{VERSION}"
+    return f"WSPBraking-{BENCHMARK_VEHICLES[vehicle]}{accel}-{version}"
 
 
 # what gymnasium itself may pass to an entry point (the spec's own settings, ignored: the id's
@@ -106,14 +124,14 @@ def env_id(vehicle: str, tier: str) -> str:
 _GYM_KEYS = ("max_episode_steps", "autoreset", "disable_env_checker", "apply_api_compatibility")
 
 
-def ids() -> dict[str, tuple[str, str]]:
-    """Every registered benchmark id and its ``(vehicle, tier)``."""
-    return {env_id(v, t): (v, t) for v in BENCHMARK_VEHICLES for t in TIERS}
+def ids() -> dict[str, tuple[str, str, str]]:
+    """Every registered benchmark id, every version, and its ``(vehicle, tier, version)``."""
+    return {env_id(v, t, n): (v, t, n) for n in VERSIONS for v in BENCHMARK_VEHICLES for t in TIERS}
 
 
-def _resolve(benchmark_id: str, kwargs: dict[str, Any]) -> tuple[str, str]:
-    """The vehicle and tier of a registered id; any setting given besides gymnasium's own is
-    refused in one line (the id fixes them all)."""
+def _resolve(benchmark_id: str, kwargs: dict[str, Any]) -> tuple[str, str, str]:
+    """The vehicle, tier and version of a registered id; any setting given besides gymnasium's
+    own is refused in one line (the id fixes them all)."""
     table = ids()
     if benchmark_id not in table:
         raise ValueError(f"benchmark_id: {benchmark_id!r} is not registered")
@@ -129,9 +147,9 @@ def _resolve(benchmark_id: str, kwargs: dict[str, Any]) -> tuple[str, str]:
 def make_benchmark_env(
     benchmark_id: str, render_mode: str | None = None, **kwargs: Any
 ) -> WSPBrakingEnv:
-    """The registered single environment ``benchmark_id`` (``WSPBraking-UICZ1-v1``, ...)."""
-    vehicle, tier = _resolve(benchmark_id, kwargs)
-    return WSPBrakingEnv(render_mode=render_mode, **benchmark_env_kwargs(vehicle, tier))
+    """The registered single environment ``benchmark_id`` (``WSPBraking-UICZ1-v2``, ...)."""
+    vehicle, tier, version = _resolve(benchmark_id, kwargs)
+    return WSPBrakingEnv(render_mode=render_mode, **benchmark_env_kwargs(vehicle, tier, version))
 
 
 def make_benchmark_vector_env(
@@ -139,7 +157,9 @@ def make_benchmark_vector_env(
 ) -> WSPBrakingVectorEnv:
     """The registered native vector environment ``benchmark_id`` (gymnasium's
     ``max_episode_steps`` is ignored: the id's time limit holds)."""
-    vehicle, tier = _resolve(benchmark_id, kwargs)
+    vehicle, tier, version = _resolve(benchmark_id, kwargs)
     return WSPBrakingVectorEnv(
-        num_envs=num_envs, render_mode=render_mode, **benchmark_env_kwargs(vehicle, tier)
+        num_envs=num_envs,
+        render_mode=render_mode,
+        **benchmark_env_kwargs(vehicle, tier, version),
     )

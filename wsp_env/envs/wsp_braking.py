@@ -2,7 +2,8 @@
 
 Registered as ``WSPBraking-v0`` (every argument free) and, for the benchmark, as one id per
 vehicle and sensor tier that fixes every setting a score depends on (``wsp_env.registration``:
-``WSPBraking-UICZ1-v1``, ``WSPBraking-UICZ1-Accel-v1``, ...).
+``WSPBraking-UICZ1-v2``, ``WSPBraking-UICZ1-Accel-v2``, ...; each earlier version stays
+registered: Version History).
 
 ## Description
 
@@ -127,7 +128,10 @@ controller (``watchdog``, ``WatchdogConfig``, on by default): an axle released â
 venting (asking for under 5 % of the demand) or its cylinder under 5 % of the full pressure â€”
 for longer than the safety time (10 s) gets the full demand back until standstill; when the
 deceleration the sensors measure, less the gradient's part, stays below 0.2 m/s^2 for 3 s while
-the full demand stands and every wheel grips, every release is overridden until standstill.
+the full demand stands and every wheel grips, every release is overridden until standstill, or
+until every axle has read locked under that full demand for 0.2 s (``give_way_locked_s``): then
+the rail, not the controller, was the limit, the override gives way and does not trip again in
+the stop (the safety time still stands).
 ``info["metrics"]["watchdog"]`` counts its interventions. The observation's previous action is
 the agent's own (the valve action it gave; in the slip-target mode the inner loop's), not the
 watchdog's.
@@ -264,6 +268,14 @@ num_envs=N, **kwargs)``:
   ``human`` render mode, and frames of the last 10 s on one reused figure; ``action_repeat``
   (default 1: unchanged); the ``slip_target`` action mode and ``memory_features`` (off by
   default: unchanged).
+* v2 (2026-11-27; the benchmark's ids are ``-v2``, ``-v1`` stays registered and reproduces
+  every earlier result): the safety watchdog's minimum-deceleration override gives way once
+  every axle has read locked under its full demand for 0.2 s (``WatchdogConfig.
+  give_way_locked_s``; ``-v1`` sets it to 0). Before, every axle sliding together at a rail's
+  limit could trip the supervision (on the wheels alone that looks like grip) and its full
+  demand then locked every axle to standstill: on a leaves stop at -18 per mille one policy's
+  train ran 16.5 km in the 600 s limit with the override standing, 4.7 km with it giving way. Only stops where that override tripped change; ``info["metrics"]
+  ["watchdog"]`` gains ``gave_way``. ``WSPBraking-v0``'s default watchdog changed with it.
 """
 
 from __future__ import annotations

@@ -231,6 +231,8 @@ def _summary(
         valve_operations_per_axle_mean=float(np.mean([r["valve_cycles"] for r in pick]) / n_axles),
         watchdog_interventions=int(sum(wd)),
         watchdog_runs=int(sum(1 for w in wd if w > 0)),
+        # stops where the minimum-deceleration override gave way (every axle locked under it)
+        watchdog_gave_way_runs=int(sum(r["watchdog"]["gave_way"] for r in pick)),
         reference_error_rms_kmh_mean=float(
             np.mean([r["reference_speed_error_rms_kmh"] for r in pick])
         ),

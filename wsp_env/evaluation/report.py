@@ -162,7 +162,7 @@ def benchmark_markdown(payload: dict[str, Any]) -> str:
         "",
         "| policy | score (IQM) | 95 % interval | scored stops | stop / classical, mean | "
         "worst | pass rate | sliding energy, kJ | longest lock, s (max) | air, l | valve ops "
-        "per axle | watchdog (stops) | reference error RMS, km/h |",
+        "per axle | watchdog (stops; gave way) | reference error RMS, km/h |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for name, p in payload["policies"].items():
@@ -173,7 +173,8 @@ def benchmark_markdown(payload: dict[str, Any]) -> str:
             f"{p['stop_ratio_worst']:.2f} | {100 * p['pass_rate']:.0f} % | "
             f"{p['sliding_energy_kJ_mean']:.0f} | {p['max_lock_s_max']:.1f} | "
             f"{p['air_litres_mean']:.0f} | {p['valve_operations_per_axle_mean']:.1f} | "
-            f"{p['watchdog_interventions']} ({p['watchdog_runs']}) | "
+            f"{p['watchdog_interventions']} ({p['watchdog_runs']}; "
+            f"{p.get('watchdog_gave_way_runs', '-')}) | "
             f"{p['reference_error_rms_kmh_mean']:.2f} |"
         )
     oracle = payload["policies"].get("oracle", {}).get("beaten_by")
