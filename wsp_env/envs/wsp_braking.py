@@ -48,10 +48,11 @@ measured slip settles on the target (median mid-stop 3.86-3.98 km/h for 4 km/h o
 (``slip_target_min_kmh=0``, ``a = -1``) asks for no measured slip, so from a stop's start the
 cylinders stay nearly empty; with ideal sensors every axle is released, and the
 minimum-deceleration supervision overrides every release 5.8-6.3 s into the stop (the demand's
-build-up and its 3 s), after which every axle gets the full demand until standstill whatever
-the target (on soap the wheels then lock: the longest lock of six stops 57 s from 120 km/h);
-with the wheel-sensor tier's scale errors some axles fill, the others stay empty until the
-10 s safety time restores them, and they lock on soap. Hence the default minimum of 0.5 km/h: ``a = -1`` then fills until the wheels
+build-up and its 3 s), after which every axle gets the full demand whatever the target (on soap
+the wheels then lock, the override gives way, the loop vents again and the 10 s safety time
+restores every axle to standstill: the longest lock of six stops 78 s from 120 km/h); with the
+wheel-sensor tier's scale errors some axles fill, the others stay empty until the safety time
+restores them, and they lock on soap. Hence the default minimum of 0.5 km/h: ``a = -1`` then fills until the wheels
 slip that much, and held from the start of 36 stops (dry and soap, 120-160 km/h, ideal and
 wheel-tier sensors) it never brought the watchdog in
 (``scripts/slip_target_study.py --part zero``). With the wheel-sensor tier, six seeds each,
@@ -61,8 +62,10 @@ on oil at 100 km/h 4-9 % shorter. On leaves at 100 km/h (adhesion 0.029-0.042) o
 every axle keeps all the wheels within the estimator's working band of each other, which the
 minimum-deceleration supervision reads as gripping wheels while the rail gives too little
 deceleration: it trips in 5 of 6 stops at 4 km/h and 1 of 6 at 2 km/h, and its full demand
-then locks the wheels to standstill — the targets are the learner's to choose per axle and
-stop.
+locks every axle. The override then gives way; at 2 km/h the stop recovers, at 4 km/h the
+wheels spin up slowly on leaves, the estimator's free-roll anchor (wheel sensors alone) sets
+the reference to one of them far below the train, and the loop brakes them back into a lock
+(139-260 s) — the targets are the learner's to choose per axle and stop.
 ``SlipTargetPolicy`` runs the same loop with a constant target from outside, in continuous mode,
 bit for bit the same stop. The kernel's previous-action entries hold the loop's valve commands;
 the agent's own last action is the observation's tail.
