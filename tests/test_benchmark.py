@@ -257,6 +257,13 @@ def test_benchmark_runs_policies_through_one_path_and_refuses_a_foreign_tier(
     sub = next(a for a in build_parser()._actions if a.dest == "command")
     stops = next(a for a in sub.choices["benchmark"]._actions if a.dest == "stops")
     assert tuple(stops.choices) == tuple(STOP_SETS)
+    version = next(a for a in sub.choices["benchmark"]._actions if a.dest == "version")
+    assert tuple(version.choices) == VERSIONS and version.default == VERSION
+    # an earlier version of the ids: named in the JSON, its watchdog (checked on the ids)
+    out = tmp_path / "v1.json"
+    rc = main(["benchmark", "--policy", "classical", "--runs", "2", "--version", "v1",
+               "--json", str(out), "--no-progress"])  # fmt: skip
+    assert rc == 0 and json.loads(out.read_text())["benchmark"] == "WSPBraking-UICZ1-v1"
 
 
 @pytest.mark.parametrize(

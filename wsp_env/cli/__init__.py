@@ -452,6 +452,11 @@ def _add_benchmark(sub: argparse._SubParsersAction) -> None:
         help="sealed: the test set (the result of record); development: 300 other stops of the "
         "same distribution, to compare and select on (default: sealed)",
     )  # fmt: skip
+    p.add_argument(
+        "--version", choices=("v1", "v2"), default="v2",
+        help="the ids' version: v2 (default, the current one); v1 reproduces the figures "
+        "measured before 2026-11-27 (the watchdog's override standing until standstill)",
+    )  # fmt: skip
     p.add_argument("--json", dest="json_path", default=None, help="write the result here")
     p.add_argument("--report", default=None, help="write report.md into this folder")
     p.add_argument("--no-progress", action="store_true", help="no progress lines")
@@ -481,7 +486,7 @@ def cmd_benchmark(args: argparse.Namespace) -> dict[str, Any]:
     with _executor(args) as executor:
         payload = run_benchmark(
             policies, args.vehicle, args.tier, runs, progress, executor=executor,
-            stop_set=args.stops,
+            stop_set=args.stops, version=args.version,
         )  # fmt: skip
     if report_tmp is not None:
         from wsp_env.evaluation.report import write_benchmark_report

@@ -772,6 +772,12 @@ class BrakingCore:
                 "reference estimator existed: resume it with the version that wrote it)"
             )
         for k in self._STATE_ARRAYS:
+            if getattr(self, k).shape != np.shape(state["core"][k]):  # e.g. before -v2's column
+                raise ValueError(
+                    f"state: {k} has shape {np.shape(state['core'][k])}, this core's is "
+                    f"{getattr(self, k).shape} (saved by another version: resume it with the "
+                    "version that wrote it)"
+                )
             getattr(self, k)[...] = state["core"][k]
         for k in self._SIM_ARRAYS:
             getattr(self.sim, k)[...] = state["sim"][k]

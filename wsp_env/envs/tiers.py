@@ -25,6 +25,7 @@ period, 1 ms substeps and a 600 s time limit.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 from typing import Any
 
@@ -101,7 +102,7 @@ def benchmark_env_kwargs(vehicle: str, tier: str, version: str = VERSION) -> dic
         "accelerometer": tier == "wheels+accel",
         "sensors": dataclasses.asdict(TIER_SENSORS[tier]),
         "estimator": None,
-        "watchdog": VERSION_WATCHDOG[version],
+        "watchdog": copy.deepcopy(VERSION_WATCHDOG[version]),
         "reward": None,
         "scenario": dataclasses.asdict(BENCHMARK_SCENARIO),
         "control_period_s": 0.02,

@@ -50,7 +50,8 @@ cylinders stay nearly empty; with ideal sensors every axle is released, and the
 minimum-deceleration supervision overrides every release 5.8-6.3 s into the stop (the demand's
 build-up and its 3 s), after which every axle gets the full demand whatever the target (on soap
 the wheels then lock, the override gives way, the loop vents again and the 10 s safety time
-restores every axle to standstill: the longest lock of six stops 78 s from 120 km/h); with the
+restores the axles to standstill, 23 of 24: the longest lock of six stops 78 s from 120 km/h);
+with the
 wheel-sensor tier's scale errors some axles fill, the others stay empty until the safety time
 restores them, and they lock on soap. Hence the default minimum of 0.5 km/h: ``a = -1`` then fills until the wheels
 slip that much, and held from the start of 36 stops (dry and soap, 120-160 km/h, ideal and
@@ -65,7 +66,7 @@ deceleration: it trips in 5 of 6 stops at 4 km/h and 1 of 6 at 2 km/h, and its f
 locks every axle. The override then gives way; at 2 km/h the stop recovers, at 4 km/h the
 wheels spin up slowly on leaves, the estimator's free-roll anchor (wheel sensors alone) sets
 the reference to one of them far below the train, and the loop brakes them back into a lock
-(139-260 s) — the targets are the learner's to choose per axle and stop.
+(the longest 260 s) — the targets are the learner's to choose per axle and stop.
 ``SlipTargetPolicy`` runs the same loop with a constant target from outside, in continuous mode,
 bit for bit the same stop. The kernel's previous-action entries hold the loop's valve commands;
 the agent's own last action is the observation's tail.
@@ -277,7 +278,7 @@ num_envs=N, **kwargs)``:
   give_way_locked_s``; ``-v1`` sets it to 0). Before, every axle sliding together at a rail's
   limit could trip the supervision (on the wheels alone that looks like grip) and its full
   demand then locked every axle to standstill: on a leaves stop at -18 per mille one policy's
-  train ran 16.5 km in the 600 s limit with the override standing, 4.7 km with it giving way. Only stops where that override tripped change; ``info["metrics"]
+  train ran 16.5 km in the 600 s limit with the override standing, 4.6 km with it giving way. Only stops where that override tripped change; ``info["metrics"]
   ["watchdog"]`` gains ``gave_way``. ``WSPBraking-v0``'s default watchdog changed with it.
 """
 

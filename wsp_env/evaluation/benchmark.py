@@ -45,7 +45,7 @@ from typing import Any
 import numpy as np
 
 from wsp_env.core.config import VehicleConfig, load_vehicle
-from wsp_env.envs.tiers import benchmark_env_kwargs, check_tier, env_id
+from wsp_env.envs.tiers import VERSION, benchmark_env_kwargs, check_tier, env_id
 from wsp_env.evaluation.runner import run_runs
 from wsp_env.evaluation.suites import Run
 
@@ -270,10 +270,12 @@ def run_benchmark(
     keep_runs: bool = True,
     executor: Any = None,
     stop_set: str = "sealed",
+    version: str = VERSION,
 ) -> dict[str, Any]:
     """Score ``policies`` (``policy.make_policy`` objects) on the sealed set of ``vehicle`` in
     sensor ``tier`` (or another of ``STOP_SETS``: ``development``): ``none`` and the tier's
-    classical WSP run too (the score's ends).
+    classical WSP run too (the score's ends). ``version``: the ids' version (``tiers.VERSIONS``;
+    an earlier one reproduces the figures measured under it).
     ``executor``: as ``runner.run_suite``'s (``distributed.RayExecutor``: the stops split
     across workers, the same payload).
 
@@ -284,7 +286,7 @@ def run_benchmark(
     from wsp_env.policy import NoWSP, make_policy
 
     check_tier(tier)
-    kwargs = benchmark_env_kwargs(vehicle, tier)
+    kwargs = benchmark_env_kwargs(vehicle, tier, version)
     veh = load_vehicle(kwargs.pop("vehicle"))
     stops = sealed_runs(veh, runs, stop_set)  # refuses an unknown set or count before any run
     max_time_s = kwargs.pop("max_time_s")
@@ -299,7 +301,7 @@ def run_benchmark(
     results: dict[str, list[dict[str, Any]]] = {}
     for p in todo:
         if progress is not None:
-            progress(f"{env_id(vehicle, tier)}: {p.name} on {len(stops)} stops")
+            progress(f"{env_id(vehicle, tier, version)}: {p.name} on {len(stops)} stops")
         res, _ = (run_runs if executor is None else executor.run_runs)(
             veh, stops, p, record="none", max_time_s=max_time_s,
             env_kwargs=kwargs, policy_keys=POLICY_KEYS,
@@ -335,7 +337,7 @@ def run_benchmark(
             ))  # fmt: skip
         out_policies["oracle"]["beaten_by"] = beaten
     payload: dict[str, Any] = {
-        "benchmark": env_id(vehicle, tier),
+        "benchmark": env_id(vehicle, tier, version),
         "vehicle": vehicle,
         "tier": tier,
         "runs": len(stops),
