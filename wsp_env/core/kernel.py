@@ -365,11 +365,11 @@ def watchdog_update(e, cmd, axle_state, demand, full_demand, env_par, wsp, axle_
     **Giving way** (``OP_WD_GIVE_WAY_S``): once every axle's measured speed has been locked
     (``integrator.is_locked``) against the shared reference for that long while the override
     stands (long enough that the wheels' last readings at standstill, under a reference that
-    lags them, are not taken for a lock), the
-    full demand has shown that the rail, not the controller, was the limit — every axle sliding
-    together at a rail's limit looks like grip on the wheels alone — and on such a rail locked
-    wheels brake worse than any WSP (on a steep downhill they run away). The override ends and
-    does not trip again in the stop; the safety time still stands."""
+    lags them, are not taken for a lock), the full demand has shown that the rail, not the
+    controller, was the limit — every axle sliding together at a rail's limit looks like grip
+    on the wheels alone — and on such a rail locked wheels brake worse than any WSP (on a steep
+    downhill they run away). The override ends and does not trip again in the stop; the safety
+    time still stands."""
     if obs_par[OP_WD_ON] <= 0.0:
         return
     n_axles = axle_wsp.shape[1]
