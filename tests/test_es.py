@@ -60,8 +60,9 @@ def test_a_member_acts_as_the_model_file_holding_its_weights_bit_for_bit(start, 
     layers, _ = es.actor_layers(SB3Policy(start).model)
     theta0 = es.get_parameters(layers[-1:])
     theta1 = theta0 + 0.05 * np.random.default_rng(0).standard_normal(theta0.size)
-    both, watchdog = es.evaluate_population(start, np.stack([theta0, theta1]), SEEDS, 1)
-    assert watchdog.shape == both.shape and watchdog.dtype == bool
+    both, watchdog, dist = es.evaluate_population(start, np.stack([theta0, theta1]), SEEDS, 1)
+    assert watchdog.shape == both.shape == dist.shape and watchdog.dtype == bool
+    assert (dist > 0).all()
     assert np.array_equal(both[0], _returns(SB3Policy(start), start, SEEDS))
     moved = es.write_model(start, tmp_path / "model.zip", theta1, 1, _meta(start))
     assert np.array_equal(both[1], _returns(SB3Policy(moved), start, SEEDS))
@@ -69,7 +70,7 @@ def test_a_member_acts_as_the_model_file_holding_its_weights_bit_for_bit(start, 
     # two moving layers: the same weights in a member and in a file
     theta2 = es.get_parameters(layers[-2:])
     theta2 = theta2 + 0.05 * np.random.default_rng(1).standard_normal(theta2.size)
-    pair, _ = es.evaluate_population(start, np.stack([theta2, theta2]), SEEDS[:2], 2)
+    pair, _, _ = es.evaluate_population(start, np.stack([theta2, theta2]), SEEDS[:2], 2)
     (tmp_path / "two").mkdir()
     moved = es.write_model(start, tmp_path / "two" / "model.zip", theta2, 2, _meta(start))
     assert np.array_equal(pair[0], pair[1])
@@ -232,18 +233,24 @@ def test_averaged_and_guarded_fine_tune_resumes_and_writes_the_average(start, tm
     assert hist[0]["current_guarded"] is False  # generation 0's current is the start
 
 
-def _scripted(monkeypatch, out, member_s, calls):
+def _scripted(monkeypatch, out, member_s, calls, member_ratio=None):
     """``evaluate_population`` replaced by scripted normalised returns: the start and the
     current weights 1.0 on every stop, the members ``member_s`` (one row a member, + then -);
-    the ``thetas`` it was given kept in ``calls``."""
+    their stopping distances the classical WSP's (the pool's ``d_classical``, else 100 m)
+    times 1 for the start and the current weights and ``member_ratio`` for the members (1
+    where not given); the ``thetas`` it was given kept in ``calls``."""
 
     def fake(start, thetas, seeds, n_layers):
         pool = json.loads((out / es.POOL).read_text())
         i = [s - es.TRAINING_SEED_BASE for s in seeds]
         r0, r1 = np.array(pool["r_none"])[i], np.array(pool["r_classical"])[i]
         s = np.vstack([np.ones((2, len(seeds))), np.asarray(member_s, dtype=float)])
+        ratio = np.ones(s.shape)
+        if member_ratio is not None:
+            ratio[2:] = member_ratio
+        d = np.array(pool.get("d_classical", [100.0] * len(pool["seeds"])))[i]
         calls.append(thetas.copy())
-        return r0 + s * (r1 - r0), np.zeros(s.shape, dtype=bool)
+        return r0 + s * (r1 - r0), np.zeros(s.shape, dtype=bool), ratio * d
 
     monkeypatch.setattr(es, "evaluate_population", fake)
 
@@ -269,6 +276,76 @@ def test_the_guard_turns_the_step_away_from_a_member_that_loses_a_stop(start, tm
         hist = json.loads((out / es.HISTORY).read_text())
         assert hist[0]["members_guarded"] == (1 if guard else 0)
     assert moved[0.0] > 0 > moved[0.2]
+
+
+def test_the_distance_cap_turns_the_step_away_from_a_member_running_long(start, tmp_path):
+    """One pair, scored alike on the score (the same normalised returns, mirrored), but the
+    + member runs its second stop 1.3 times the classical WSP's distance and the - member
+    1.0 times: without the cap the step goes the + member's way (its higher score), with a cap
+    of 1.05 and a weight of 1 the other way, and the history carries the hinge's terms."""
+    _finetune(start, tmp_path / "p", 0)
+    pool = json.loads((tmp_path / "p" / es.POOL).read_text())
+    assert len(pool["d_classical"]) == 4 and min(pool["d_classical"]) > 0  # a new pool has them
+    moved = {}
+    for cap in (0.0, 1.05):
+        out = tmp_path / f"c{cap}"
+        out.mkdir()
+        (out / es.POOL).write_text(json.dumps(pool))
+        calls = []
+        with pytest.MonkeyPatch.context() as mp:
+            # score (IQM of two stops: their mean) 1.02 against 1.0
+            _scripted(mp, out, [[1.02, 1.02], [1.0, 1.0]], calls, [[1.0, 1.3], [1.0, 1.0]])
+            _finetune(start, out, 1, ratio_cap=cap)
+        theta = calls[0][1]
+        eps = calls[0][2] - theta
+        moved[cap] = float((np.load(out / es.STATE)["theta"] - theta) @ eps)
+        row = json.loads((out / es.HISTORY).read_text())[0]
+        assert ("hinge_current" in row) == bool(cap)
+        if cap:
+            assert row["hinge_current"] == 0.0 and row["stops_over_cap_current"] == 0
+            assert row["fitness_current"] == row["score_current"]
+    assert moved[0.0] > 0 > moved[1.05]
+
+
+def test_the_distance_hinge_is_the_mean_excess_over_the_cap():
+    d_cls = np.array([100.0, 200.0, 400.0])
+    d = np.array([[100.0, 200.0, 400.0], [130.0, 190.0, 440.0], [100.0, 300.0, 400.0]])
+    h = es.distance_hinge(d, d_cls, 1.05)
+    assert np.allclose(h, [0.0, (0.25 + 0.0 + 0.05) / 3, 0.45 / 3])
+    assert np.allclose(es.distance_hinge(d, d_cls, 1.0), [0.0, 0.4 / 3, 0.5 / 3])
+
+
+def test_a_pool_without_distances_gets_them_and_the_unscored_stops_enter_the_hinge_only(
+    start, tmp_path
+):
+    """A pool written before it carried the classical WSP's distances (an older run's) gets
+    them from the classical WSP when the cap asks for them, equal to a new pool's; with
+    unscored stops drawn, every member runs them too (the history's worst ratio spans them)
+    and the score is the same as without them."""
+    _finetune(start, tmp_path / "p", 0)
+    pool = json.loads((tmp_path / "p" / es.POOL).read_text())
+    old = {k: v for k, v in pool.items() if k != "d_classical"}
+    out = tmp_path / "old"
+    out.mkdir()
+    (out / es.POOL).write_text(json.dumps(old))
+    _finetune(start, out, 0, ratio_cap=1.05)
+    assert json.loads((out / es.POOL).read_text())["d_classical"] == pool["d_classical"]
+    # the pool's unscored stops, made so by the none's returns (an 8 s stop gains little)
+    r_cls = np.array(pool["r_classical"])
+    pool["r_none"][2:] = (r_cls[2:] - 0.01).tolist()  # under benchmark.MIN_GAIN
+    pool["r_none"][:2] = (r_cls[:2] - 1.0).tolist()
+    runs = {}
+    for unscored in (0, 2):
+        out = tmp_path / f"u{unscored}"
+        out.mkdir()
+        (out / es.POOL).write_text(json.dumps(pool))
+        runs[unscored] = _finetune(start, out, 1, ratio_cap=1.05, unscored=unscored)["last"]
+    assert runs[0]["score_current"] == runs[2]["score_current"]
+    assert runs[0]["generation"] == runs[2]["generation"] == 0
+    (tmp_path / "u3").mkdir()
+    (tmp_path / "u3" / es.POOL).write_text(json.dumps(pool))
+    with pytest.raises(ValueError, match="unscored: the pool holds 2 unscored stops, fewer"):
+        _finetune(start, tmp_path / "u3", 1, ratio_cap=1.05, unscored=3)
 
 
 def test_the_current_member_is_the_average_of_the_steps_taken(start, tmp_path, monkeypatch):
@@ -348,6 +425,12 @@ def test_centred_ranks_are_scale_free_and_share_ties():
          "guard: must be a number >= 0"),
         (["{start}", "--out", "{out}", "--generations", "1", "--guard", "nan"],
          "guard: must be a number >= 0"),
+        (["{start}", "--out", "{out}", "--generations", "1", "--ratio-cap", "0.9"],
+         "ratio_cap: must be 0 (off) or a number in [1, 10)"),
+        (["{start}", "--out", "{out}", "--generations", "1", "--ratio-weight", "-1"],
+         "ratio_weight: must be a number >= 0"),
+        (["{start}", "--out", "{out}", "--generations", "1", "--unscored", "2"],
+         "unscored: counts in the distance hinge only; set ratio_cap too"),
     ],
 )  # fmt: skip
 def test_bad_fine_tune_input_is_one_line_and_writes_nothing(start, tmp_path, capsys, argv,

@@ -729,6 +729,14 @@ def _add_finetune(sub: argparse._SubParsersAction) -> None:
         ("--seed", _seed, "the draws' seed"),
         ("--average", float, "decay of the written weights' running average (0: last step's)"),
         ("--guard", float, "a member losing more than this on any stop ranks last (0: off)"),
+        (
+            "--ratio-cap",
+            float,
+            "the fitness loses the mean excess of its stops' distance over this times the "
+            "classical WSP's (0: off)",
+        ),
+        ("--ratio-weight", float, "that excess' weight, in the score's units"),
+        ("--unscored", int, "unscored (dry) stops a generation, in that excess only"),
     ):
         name = flag[2:].replace("-", "_")
         p.add_argument(flag, type=kind, default=None,
@@ -739,7 +747,7 @@ def _add_finetune(sub: argparse._SubParsersAction) -> None:
 
 
 FINETUNE_SETTINGS = ("pairs", "stops", "pool", "sigma", "learning_rate", "layers", "seed",
-                     "average", "guard")  # fmt: skip
+                     "average", "guard", "ratio_cap", "ratio_weight", "unscored")  # fmt: skip
 
 
 def cmd_finetune(args: argparse.Namespace) -> dict[str, Any]:

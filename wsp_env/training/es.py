@@ -22,7 +22,9 @@ Neural Networks 23(4)). Per generation:
    sensor errors (common random numbers: members differ by their weights only) — beside the
    current weights and the start, all as one batch of environments through the benchmark's own
    runner (``runner.run_runs``: the tier's sensors, the watchdog, the default reward);
-3. each member's fitness is the benchmark's score on those stops (``benchmark.score``); the
+3. each member's fitness is the benchmark's score on those stops (``benchmark.score``), less
+   ``ratio_weight`` times its mean distance hinge where ``ratio_cap`` is set (the stops run
+   past ``ratio_cap`` times the classical WSP's distance; issue 23 item 6); the
    perturbations, weighted by their fitnesses' centred ranks, estimate the gradient, and Adam
    (Kingma & Ba 2015) takes a step.
 
@@ -99,6 +101,16 @@ class ESSettings:
                                            stop of its generation, or brings the watchdog
                                            where the start ran without it, ranks below every
                                            member that does neither (0: no guard)
+    ``ratio_cap``                 0.0      > 0 (>= 1): each member's fitness loses
+                                           ``ratio_weight`` times the mean over its stops of
+                                           ``max(0, d / d_classical - ratio_cap)``, its
+                                           stopping distance against the classical WSP's
+                                           (issue 23 item 6: no stop 10 % longer); 0: off
+    ``ratio_weight``              1.0      the weight of that hinge, in the score's units
+    ``unscored``                  0        stops a generation drawn from the pool's unscored
+                                           ones (dry rails, where the classical WSP gains
+                                           < ``benchmark.MIN_GAIN``): run by every member,
+                                           in the hinge only (the score cannot weigh them)
     ============================  =======  ==================================================
 
     ``average`` is Polyak-Ruppert averaging (Polyak & Juditsky 1992, SIAM J. Control Optim.
@@ -117,6 +129,9 @@ class ESSettings:
     seed: int = 0
     average: float = 0.0
     guard: float = 0.0
+    ratio_cap: float = 0.0
+    ratio_weight: float = 1.0
+    unscored: int = 0
 
     def check(self) -> None:
         """One line naming the first bad field."""
@@ -140,6 +155,17 @@ class ESSettings:
         g = self.guard
         if isinstance(g, bool) or not isinstance(g, (int, float)) or not 0 <= g < math.inf:
             raise ValueError(f"guard: must be a number >= 0, got {g!r}")
+        c = self.ratio_cap
+        if isinstance(c, bool) or not isinstance(c, (int, float)) or not (c == 0 or 1 <= c < 10):
+            raise ValueError(f"ratio_cap: must be 0 (off) or a number in [1, 10), got {c!r}")
+        w = self.ratio_weight
+        if isinstance(w, bool) or not isinstance(w, (int, float)) or not 0 <= w < math.inf:
+            raise ValueError(f"ratio_weight: must be a number >= 0, got {w!r}")
+        u = self.unscored
+        if isinstance(u, bool) or not isinstance(u, int) or u < 0:
+            raise ValueError(f"unscored: must be a whole number >= 0, got {u!r}")
+        if u and not c:
+            raise ValueError("unscored: counts in the distance hinge only; set ratio_cap too")
 
 
 def actor_layers(model: Any) -> tuple[list[Any], type]:
@@ -365,7 +391,25 @@ def training_pool(
         res, _ = run_runs(veh, runs, make_policy(name, tier=tier), max_time_s=max_time_s,
                           env_kwargs=kwargs, policy_keys=POLICY_KEYS)  # fmt: skip
         out[f"r_{name}"] = [r["return"] for r in res]
+        if name == "classical":
+            out["d_classical"] = [r["stopping_distance_m"] for r in res]
     return out
+
+
+def classical_distances(
+    start: SB3Policy, seeds: list[int], progress: Callable[[str], None] | None = None
+) -> list[float]:
+    """The classical WSP's stopping distance on each of the pool's ``seeds`` (for a pool
+    written before the pool carried them; ``training_pool`` records them with its returns)."""
+    from wsp_env.policy import make_policy
+
+    veh, kwargs, max_time_s, tier = env_setup(start)
+    if progress is not None:
+        progress(f"pool: the classical WSP's stopping distances on {len(seeds)} training stops")
+    res, _ = run_runs(veh, training_runs(veh, seeds), make_policy("classical", tier=tier),
+                      max_time_s=max_time_s, env_kwargs=kwargs,
+                      policy_keys=POLICY_KEYS)  # fmt: skip
+    return [r["stopping_distance_m"] for r in res]
 
 
 def _read_pool(path: Path, start: SB3Policy, n: int) -> dict | None:
@@ -383,9 +427,13 @@ def _read_pool(path: Path, start: SB3Policy, n: int) -> dict | None:
         and pool.get("seeds") == pool_seeds(n)
     )
     ends = [pool.get(k) for k in ("r_none", "r_classical")]
+    if "d_classical" in pool:  # optional: pools written before 2026-11-27 lack it
+        ends.append(pool["d_classical"])
     ok = all(isinstance(e, list) and len(e) == n for e in ends)
     if ok:
         ok = all(isinstance(x, (int, float)) and math.isfinite(x) for e in ends for x in e)
+    if ok and "d_classical" in pool:
+        ok = all(x > 0 for x in pool["d_classical"])
     return pool if same and ok else None
 
 
@@ -432,9 +480,10 @@ def file_sha256(path: Path) -> str:
 
 def evaluate_population(
     start: Path, thetas: np.ndarray, seeds: list[int], n_layers: int
-) -> tuple[np.ndarray, np.ndarray]:
-    """Each member's return on each stop and whether the watchdog intervened there, both
-    ``(members, stops)``: one batch of environments through the benchmark's runner."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each member's return on each stop, whether the watchdog intervened there and its
+    stopping distance [m], each ``(members, stops)``: one batch of environments through the
+    benchmark's runner."""
     policy = PopulationPolicy(start, thetas, len(seeds), n_layers)
     veh, kwargs, max_time_s, _ = env_setup(policy)
     res, _ = run_runs(veh, training_runs(veh, seeds, len(thetas)), policy, max_time_s=max_time_s,
@@ -442,7 +491,14 @@ def evaluate_population(
     shape = (len(thetas), len(seeds))
     returns = np.array([r["return"] for r in res]).reshape(shape)
     watchdog = np.array([r["watchdog"]["total"] > 0 for r in res]).reshape(shape)
-    return returns, watchdog
+    distance_m = np.array([r["stopping_distance_m"] for r in res]).reshape(shape)
+    return returns, watchdog, distance_m
+
+
+def distance_hinge(distance_m: np.ndarray, d_classical_m: np.ndarray, cap: float) -> np.ndarray:
+    """Each member's mean over its stops (the last axis) of ``max(0, d / d_classical - cap)``:
+    how far its stops run past ``cap`` times the classical WSP's stopping distance."""
+    return np.maximum(distance_m / d_classical_m - cap, 0.0).mean(axis=-1)
 
 
 def guarded(s: np.ndarray, watchdog: np.ndarray, guard: float) -> np.ndarray:
@@ -554,11 +610,22 @@ def _finetune(
             progress(f"pool: {settings.pool} training stops from {out / POOL}")
     seeds = np.array(pool["seeds"])
     r_none, r_cls = np.array(pool["r_none"]), np.array(pool["r_classical"])
-    scored = np.flatnonzero(normalised(r_cls, r_none, r_cls)[1])  # the mask of scored stops
+    mask = normalised(r_cls, r_none, r_cls)[1]
+    scored, unscored = np.flatnonzero(mask), np.flatnonzero(~mask)
     if scored.size < settings.stops:
         raise ValueError(
             f"pool: {scored.size} scored stops, fewer than {settings.stops} a generation"
         )
+    if unscored.size < settings.unscored:
+        raise ValueError(
+            f"unscored: the pool holds {unscored.size} unscored stops, fewer than "
+            f"{settings.unscored} a generation"
+        )
+    if settings.ratio_cap and "d_classical" not in pool:
+        pool["d_classical"] = classical_distances(base, [int(x) for x in seeds], progress)
+        if resume:
+            write_json(out / POOL, pool)
+    d_cls = np.array(pool["d_classical"]) if settings.ratio_cap else None
     if not resume:  # the pool and the settings first, so a run stopped now can be resumed
         write_json(out / POOL, pool)
         write_json(out / SETTINGS, {"settings": asdict(settings), "start_sha256": digest,
@@ -570,12 +637,24 @@ def _finetune(
         rng = np.random.default_rng([settings.seed, g])
         pick = np.sort(rng.choice(scored, size=settings.stops, replace=False))
         eps = rng.standard_normal((settings.pairs, theta.size))
+        # drawn after eps, and only when asked: a run without them draws as before
+        extra = (np.sort(rng.choice(unscored, size=settings.unscored, replace=False))
+                 if settings.unscored else np.zeros(0, dtype=int))  # fmt: skip
+        ran = np.concatenate([pick, extra])
         current = averaged(theta, total, settings.average, g)
         thetas = population(theta0, current, theta, settings.sigma * eps)
-        returns, watchdog = evaluate_population(start_path, thetas, [int(s) for s in seeds[pick]],
-                                                settings.layers)  # fmt: skip
-        s, _ = normalised(returns, r_none[pick], r_cls[pick])  # every picked stop is scored
-        fitness = iqm(s, axis=1)
+        returns, watchdog, dist = evaluate_population(start_path, thetas,
+                                                      [int(s) for s in seeds[ran]],
+                                                      settings.layers)  # fmt: skip
+        # every picked stop is scored; the unscored ones (after them) enter the hinge only
+        s, _ = normalised(returns[:, : pick.size], r_none[pick], r_cls[pick])
+        score = iqm(s, axis=1)
+        if d_cls is not None:
+            ratio = dist / d_cls[ran]
+            hinge = distance_hinge(dist, d_cls[ran], settings.ratio_cap)
+        else:
+            ratio, hinge = None, np.zeros(len(thetas))
+        fitness = score - settings.ratio_weight * hinge
         failed = guarded(s, watchdog, settings.guard)  # rows 1..: current, then the members
         # the guard's failures below every other member, in their own order among themselves
         u = centred_ranks(fitness[2:] - failed[1:] * (np.ptp(fitness[2:]) + 1.0))
@@ -591,9 +670,9 @@ def _finetune(
         total = settings.average * total + (1 - settings.average) * theta
         row = {
             "generation": g,
-            "score_start": float(fitness[0]),
-            "score_current": float(fitness[1]),
-            "score_gain": float(fitness[1] - fitness[0]),
+            "score_start": float(score[0]),
+            "score_current": float(score[1]),
+            "score_gain": float(score[1] - score[0]),
             "stops_better": float(np.mean(s[1] > s[0] + 1e-12)),
             "stops_worse": float(np.mean(s[1] < s[0] - 1e-12)),
             "mean_return_start": float(returns[0].mean()),
@@ -609,6 +688,12 @@ def _finetune(
             "distance_from_start": float(np.linalg.norm(theta - theta0)),
             "wall_s": round(time.time() - tg, 1),
         }
+        if ratio is not None:  # the distance hinge's terms, the start's and the current's
+            for who, i in (("start", 0), ("current", 1)):
+                row[f"fitness_{who}"] = float(fitness[i])
+                row[f"hinge_{who}"] = float(hinge[i])
+                row[f"ratio_worst_{who}"] = float(ratio[i].max())
+                row[f"stops_over_cap_{who}"] = int((ratio[i] > settings.ratio_cap).sum())
         history.append(row)
         # the history first: a stop between the two writes leaves it a row ahead, which a
         # resume cuts back to the state's generations
@@ -619,8 +704,12 @@ def _finetune(
             progress(
                 f"generation {g}: current {row['score_current']:.4f} vs start "
                 f"{row['score_start']:.4f} ({row['score_gain']:+.4f}), better on "
-                f"{row['stops_better']:.0%}, worse on {row['stops_worse']:.0%}, {row['wall_s']} s"
-            )
+                f"{row['stops_better']:.0%}, worse on {row['stops_worse']:.0%}"
+                + (f", over the distance cap on {row['stops_over_cap_current']} stops (start "
+                   f"{row['stops_over_cap_start']}), worst {row['ratio_worst_current']:.3f}"
+                   if ratio is not None else "")
+                + f", {row['wall_s']} s"
+            )  # fmt: skip
     final = averaged(theta, total, settings.average, len(history))  # what "current" was
     model_path = write_model(start_path, out / "model.zip", final, settings.layers, meta)
     payload = {
