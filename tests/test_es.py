@@ -233,12 +233,13 @@ def test_averaged_and_guarded_fine_tune_resumes_and_writes_the_average(start, tm
     assert hist[0]["current_guarded"] is False  # generation 0's current is the start
 
 
-def _scripted(monkeypatch, out, member_s, calls, member_ratio=None):
+def _scripted(monkeypatch, out, member_s, calls, member_ratio=None, member_watchdog=None):
     """``evaluate_population`` replaced by scripted normalised returns: the start and the
     current weights 1.0 on every stop, the members ``member_s`` (one row a member, + then -);
     their stopping distances the classical WSP's (the pool's ``d_classical``, else 100 m)
     times 1 for the start and the current weights and ``member_ratio`` for the members (1
-    where not given); the ``thetas`` it was given kept in ``calls``."""
+    where not given); the watchdog on the members' stops ``member_watchdog`` (none where not
+    given); the ``thetas`` it was given kept in ``calls``."""
 
     def fake(start, thetas, seeds, n_layers):
         pool = json.loads((out / es.POOL).read_text())
@@ -249,8 +250,11 @@ def _scripted(monkeypatch, out, member_s, calls, member_ratio=None):
         if member_ratio is not None:
             ratio[2:] = member_ratio
         d = np.array(pool.get("d_classical", [100.0] * len(pool["seeds"])))[i]
+        wd = np.zeros(s.shape, dtype=bool)
+        if member_watchdog is not None:
+            wd[2:] = member_watchdog
         calls.append(thetas.copy())
-        return r0 + s * (r1 - r0), np.zeros(s.shape, dtype=bool), ratio * d
+        return r0 + s * (r1 - r0), wd, ratio * d
 
     monkeypatch.setattr(es, "evaluate_population", fake)
 
@@ -305,6 +309,29 @@ def test_the_distance_cap_turns_the_step_away_from_a_member_running_long(start, 
             assert row["hinge_current"] == 0.0 and row["stops_over_cap_current"] == 0
             assert row["fitness_current"] == row["score_current"]
     assert moved[0.0] > 0 > moved[1.05]
+
+
+def test_the_watchdog_weight_turns_the_step_away_from_a_caught_member(start, tmp_path):
+    """One pair: the + member scores higher (1.02 against 1.0) but the watchdog intervened
+    on one of its two stops. Without the weight the step goes its way; with a weight of 0.1
+    (a fitness of 1.02 - 0.05) the other way."""
+    _finetune(start, tmp_path / "p", 0)
+    pool = (tmp_path / "p" / es.POOL).read_text()
+    moved = {}
+    for weight in (0.0, 0.1):
+        out = tmp_path / f"w{weight}"
+        out.mkdir()
+        (out / es.POOL).write_text(pool)
+        calls = []
+        with pytest.MonkeyPatch.context() as mp:
+            _scripted(mp, out, [[1.02, 1.02], [1.0, 1.0]], calls,
+                      member_watchdog=[[True, False], [False, False]])  # fmt: skip
+            _finetune(start, out, 1, watchdog_weight=weight)
+        theta = calls[0][1]
+        moved[weight] = float((np.load(out / es.STATE)["theta"] - theta) @ (calls[0][2] - theta))
+        row = json.loads((out / es.HISTORY).read_text())[0]
+        assert ("fitness_current" in row) == bool(weight)
+    assert moved[0.0] > 0 > moved[0.1]
 
 
 def test_the_distance_hinge_is_the_mean_excess_over_the_cap():
@@ -429,6 +456,8 @@ def test_centred_ranks_are_scale_free_and_share_ties():
          "ratio_cap: must be 0 (off) or a number in [1, 10)"),
         (["{start}", "--out", "{out}", "--generations", "1", "--ratio-weight", "-1"],
          "ratio_weight: must be a number >= 0"),
+        (["{start}", "--out", "{out}", "--generations", "1", "--watchdog-weight", "inf"],
+         "watchdog_weight: must be a number >= 0"),
         (["{start}", "--out", "{out}", "--generations", "1", "--unscored", "2"],
          "unscored: counts in the distance hinge only; set ratio_cap too"),
     ],

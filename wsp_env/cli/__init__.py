@@ -736,6 +736,11 @@ def _add_finetune(sub: argparse._SubParsersAction) -> None:
             "classical WSP's (0: off)",
         ),
         ("--ratio-weight", float, "that excess' weight, in the score's units"),
+        (
+            "--watchdog-weight",
+            float,
+            "the fitness loses this times the share of its stops with a watchdog intervention",
+        ),
         ("--unscored", int, "unscored (dry) stops a generation, in that excess only"),
     ):
         name = flag[2:].replace("-", "_")
@@ -747,7 +752,8 @@ def _add_finetune(sub: argparse._SubParsersAction) -> None:
 
 
 FINETUNE_SETTINGS = ("pairs", "stops", "pool", "sigma", "learning_rate", "layers", "seed",
-                     "average", "guard", "ratio_cap", "ratio_weight", "unscored")  # fmt: skip
+                     "average", "guard", "ratio_cap", "ratio_weight", "watchdog_weight",
+                     "unscored")  # fmt: skip
 
 
 def cmd_finetune(args: argparse.Namespace) -> dict[str, Any]:

@@ -24,7 +24,8 @@ Neural Networks 23(4)). Per generation:
    runner (``runner.run_runs``: the tier's sensors, the watchdog, the default reward);
 3. each member's fitness is the benchmark's score on those stops (``benchmark.score``), less
    ``ratio_weight`` times its mean distance hinge where ``ratio_cap`` is set (the stops run
-   past ``ratio_cap`` times the classical WSP's distance; issue 23 item 6); the
+   past ``ratio_cap`` times the classical WSP's distance) and ``watchdog_weight`` times the
+   share of its stops where the watchdog intervened (issue 23 item 6's criteria); the
    perturbations, weighted by their fitnesses' centred ranks, estimate the gradient, and Adam
    (Kingma & Ba 2015) takes a step.
 
@@ -107,6 +108,9 @@ class ESSettings:
                                            stopping distance against the classical WSP's
                                            (issue 23 item 6: no stop 10 % longer); 0: off
     ``ratio_weight``              1.0      the weight of that hinge, in the score's units
+    ``watchdog_weight``           0.0      each member's fitness loses this times the share
+                                           of its stops on which the safety watchdog
+                                           intervened (item 6: no intervention); 0: off
     ``unscored``                  0        stops a generation drawn from the pool's unscored
                                            ones (dry rails, where the classical WSP gains
                                            < ``benchmark.MIN_GAIN``): run by every member,
@@ -131,6 +135,7 @@ class ESSettings:
     guard: float = 0.0
     ratio_cap: float = 0.0
     ratio_weight: float = 1.0
+    watchdog_weight: float = 0.0
     unscored: int = 0
 
     def check(self) -> None:
@@ -158,9 +163,10 @@ class ESSettings:
         c = self.ratio_cap
         if isinstance(c, bool) or not isinstance(c, (int, float)) or not (c == 0 or 1 <= c < 10):
             raise ValueError(f"ratio_cap: must be 0 (off) or a number in [1, 10), got {c!r}")
-        w = self.ratio_weight
-        if isinstance(w, bool) or not isinstance(w, (int, float)) or not 0 <= w < math.inf:
-            raise ValueError(f"ratio_weight: must be a number >= 0, got {w!r}")
+        for name in ("ratio_weight", "watchdog_weight"):
+            w = getattr(self, name)
+            if isinstance(w, bool) or not isinstance(w, (int, float)) or not 0 <= w < math.inf:
+                raise ValueError(f"{name}: must be a number >= 0, got {w!r}")
         u = self.unscored
         if isinstance(u, bool) or not isinstance(u, int) or u < 0:
             raise ValueError(f"unscored: must be a whole number >= 0, got {u!r}")
@@ -655,6 +661,7 @@ def _finetune(
         else:
             ratio, hinge = None, np.zeros(len(thetas))
         fitness = score - settings.ratio_weight * hinge
+        fitness = fitness - settings.watchdog_weight * watchdog.mean(axis=1)
         failed = guarded(s, watchdog, settings.guard)  # rows 1..: current, then the members
         # the guard's failures below every other member, in their own order among themselves
         u = centred_ranks(fitness[2:] - failed[1:] * (np.ptp(fitness[2:]) + 1.0))
@@ -688,9 +695,11 @@ def _finetune(
             "distance_from_start": float(np.linalg.norm(theta - theta0)),
             "wall_s": round(time.time() - tg, 1),
         }
-        if ratio is not None:  # the distance hinge's terms, the start's and the current's
+        if ratio is not None or settings.watchdog_weight:
             for who, i in (("start", 0), ("current", 1)):
                 row[f"fitness_{who}"] = float(fitness[i])
+        if ratio is not None:  # the distance hinge's terms, the start's and the current's
+            for who, i in (("start", 0), ("current", 1)):
                 row[f"hinge_{who}"] = float(hinge[i])
                 row[f"ratio_worst_{who}"] = float(ratio[i].max())
                 row[f"stops_over_cap_{who}"] = int((ratio[i] > settings.ratio_cap).sum())
