@@ -77,3 +77,26 @@ def test_a_bad_file_or_policy_is_one_line_and_exits_2(tmp_path, capsys):
     Path(g).write_text(json.dumps(data))
     assert ship_criteria.main([g, "p"]) == 2
     assert "stopping_distance_m" in capsys.readouterr().err
+
+
+def test_stops_by_offset_bands_the_stops_off_leaves_by_bias_less_g_times_gradient(tmp_path):
+    """Four stops: bias - g x gradient of -0.4 (bias -0.2 on +20 per mille: 0.196 more),
+    -0.2, +0.1 and a leaves stop left out; the first runs 1.2x the classical WSP's."""
+    import stops_by_offset
+
+    conds = [(-0.2, 20.39, "soap"), (-0.2, 0.0, "soap"), (0.1, 0.0, "wet"), (-0.5, 0.0, "leaves")]
+    runs = {}
+    for name, d in (("classical", [100.0] * 4), ("p", [120.0, 100.0, 90.0, 300.0])):
+        runs[name] = [
+            {"scenario": f"s{i}", "seed": i, "stopping_distance_m": x,
+             "conditions": {"rail": rail, "gradient_permille": g,
+                            "sensors": {"accelerometer_bias_mps2": b}}}
+            for i, (x, (b, g, rail)) in enumerate(zip(d, conds, strict=True))
+        ]  # fmt: skip
+    table = stops_by_offset.rows({"run_results": runs}, "p")
+    assert [r["stops"] for r in table] == [1, 1, 0, 1, 0]
+    assert table[0]["stop_ratio_mean"] == pytest.approx(1.2) and table[0]["stops_over_1_10"] == 1
+    assert table[3]["stop_ratio_mean"] == pytest.approx(0.9) and table[2]["stop_ratio_mean"] is None
+    f = tmp_path / "b.json"
+    f.write_text(json.dumps({"run_results": runs}))
+    assert stops_by_offset.main([str(f), "q"]) == 2
