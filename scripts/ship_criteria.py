@@ -114,7 +114,11 @@ def main(argv: list[str] | None = None) -> int:
     failed = [r["criterion"] for r in rows if not r["holds"]]
     print(f"{len(rows) - len(failed)} of {len(rows)} criteria hold")
     if args.json_path:
-        Path(args.json_path).write_text(json.dumps({"policy": args.policy, "rows": rows}, indent=1))
+        try:
+            Path(args.json_path).write_text(json.dumps({"policy": args.policy, "rows": rows}))
+        except OSError as err:
+            print(f"--json: {args.json_path}: {err.strerror}", file=sys.stderr)
+            return 2
     return 1 if failed else 0
 
 

@@ -34,6 +34,10 @@ def rows(data: dict, policy: str) -> list[dict]:
         b = base.get((r["scenario"], int(r["seed"])))
         if b is None:
             raise ValueError(f"{r['scenario']}: no classical run on this stop")
+        if not b["stopping_distance_m"] > 0:
+            raise ValueError(
+                f"{r['scenario']}: stopping_distance_m: the classical WSP's is not > 0"
+            )
         c = b["conditions"]
         if c["rail"] == "leaves":
             continue
@@ -71,7 +75,11 @@ def main(argv: list[str] | None = None) -> int:
         mean = "-" if r["stop_ratio_mean"] is None else f"{r['stop_ratio_mean']:.3f}"
         print(f"| {band} | {r['stops']} | {mean} | {r['stops_over_1_10']} |")
     if args.json_path:
-        Path(args.json_path).write_text(json.dumps(table, indent=1))
+        try:
+            Path(args.json_path).write_text(json.dumps(table, indent=1))
+        except OSError as err:
+            print(f"--json: {args.json_path}: {err.strerror}", file=sys.stderr)
+            return 2
     return 0
 
 

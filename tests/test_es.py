@@ -342,13 +342,13 @@ def test_the_distance_hinge_is_the_mean_excess_over_the_cap():
     assert np.allclose(es.distance_hinge(d, d_cls, 1.0), [0.0, 0.4 / 3, 0.5 / 3])
 
 
-def test_a_pool_without_distances_gets_them_and_the_unscored_stops_enter_the_hinge_only(
+def test_a_pool_without_distances_gets_them_and_unscored_stops_enter_the_hinge_not_the_score(
     start, tmp_path
 ):
     """A pool written before it carried the classical WSP's distances (an older run's) gets
     them from the classical WSP when the cap asks for them, equal to a new pool's; with
-    unscored stops drawn, every member runs them too (the history's worst ratio spans them)
-    and the score is the same as without them."""
+    unscored stops drawn, the score is the same as without them; scripted, every member runs
+    them after the scored ones, and the hinge and the watchdog share count them."""
     _finetune(start, tmp_path / "p", 0)
     pool = json.loads((tmp_path / "p" / es.POOL).read_text())
     old = {k: v for k, v in pool.items() if k != "d_classical"}
@@ -373,6 +373,33 @@ def test_a_pool_without_distances_gets_them_and_the_unscored_stops_enter_the_hin
     (tmp_path / "u3" / es.POOL).write_text(json.dumps(pool))
     with pytest.raises(ValueError, match="unscored: the pool holds 2 unscored stops, fewer"):
         _finetune(start, tmp_path / "u3", 1, ratio_cap=1.05, unscored=3)
+    # scripted: every member runs the two scored stops, then the two unscored ones; each runs
+    # its last stop (an unscored one) 1.3 times the classical WSP's distance, which the hinge
+    # counts ((1.3 - 1.05) / 4 stops) and the score does not; the watchdog acts there too
+    seen = []
+
+    def fake(start_, thetas, seeds, n_layers):
+        seen.append(list(seeds))
+        i = [x - es.TRAINING_SEED_BASE for x in seeds]
+        r1 = np.array(pool["r_classical"])[i]
+        ratio = np.ones((len(thetas), len(seeds)))
+        ratio[:, -1] = 1.3
+        wd = np.zeros(ratio.shape, dtype=bool)
+        wd[:, -1] = True
+        d = np.array(pool["d_classical"])[i]
+        return np.tile(r1, (len(thetas), 1)), wd, ratio * d
+
+    out = tmp_path / "scripted"
+    out.mkdir()
+    (out / es.POOL).write_text(json.dumps(pool))
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(es, "evaluate_population", fake)
+        row = _finetune(start, out, 1, ratio_cap=1.05, unscored=2, watchdog_weight=0.1)["last"]
+    assert len(seen[0]) == 4 and sorted(i - es.TRAINING_SEED_BASE for i in seen[0][2:]) == [2, 3]
+    assert row["score_current"] == pytest.approx(1.0)  # the scored stops: the classical's
+    assert row["hinge_current"] == pytest.approx(0.25 / 4)
+    assert row["stops_over_cap_current"] == 1 and row["watchdog_stops_current"] == 1
+    assert row["fitness_current"] == pytest.approx(1.0 - 0.25 / 4 - 0.1 / 4)
 
 
 def test_the_current_member_is_the_average_of_the_steps_taken(start, tmp_path, monkeypatch):
@@ -459,7 +486,11 @@ def test_centred_ranks_are_scale_free_and_share_ties():
         (["{start}", "--out", "{out}", "--generations", "1", "--watchdog-weight", "inf"],
          "watchdog_weight: must be a number >= 0"),
         (["{start}", "--out", "{out}", "--generations", "1", "--unscored", "2"],
-         "unscored: counts in the distance hinge only; set ratio_cap too"),
+         "unscored: counts in the distance hinge and the watchdog share only; set ratio_cap"),
+        (["{start}", "--out", "{out}", "--generations", "1", "--ratio-cap", "nan"],
+         "ratio_cap: must be 0 (off) or a number in [1, 10)"),
+        (["{start}", "--out", "{out}", "--generations", "1", "--ratio-cap", "1.05",
+          "--unscored", "-1"], "unscored: must be a whole number >= 0"),
     ],
 )  # fmt: skip
 def test_bad_fine_tune_input_is_one_line_and_writes_nothing(start, tmp_path, capsys, argv,

@@ -34,7 +34,7 @@ def _write(path, distances, watchdog=(), summary=None):
 
 
 def test_a_policy_meeting_every_criterion_exits_0(tmp_path, capsys):
-    f = _write(tmp_path / "b.json", [80.0, 170.0, 270.0, 800.0])  # mean of ratios 0.85
+    f = _write(tmp_path / "b.json", [80.0, 170.0, 270.0, 800.0])  # mean of ratios 0.84
     assert ship_criteria.main([f, "p"]) == 0
     out = capsys.readouterr().out
     assert "10 of 10 criteria hold" in out and "FAILS" not in out
@@ -100,3 +100,13 @@ def test_stops_by_offset_bands_the_stops_off_leaves_by_bias_less_g_times_gradien
     f = tmp_path / "b.json"
     f.write_text(json.dumps({"run_results": runs}))
     assert stops_by_offset.main([str(f), "q"]) == 2
+    runs["classical"][1]["stopping_distance_m"] = 0.0
+    f.write_text(json.dumps({"run_results": runs}))
+    assert stops_by_offset.main([str(f), "p"]) == 2
+
+
+def test_an_unwritable_json_path_is_one_line(tmp_path, capsys):
+    f = _write(tmp_path / "b.json", [80.0, 170.0, 270.0, 800.0])
+    assert ship_criteria.main([f, "p", "--json", str(tmp_path / "no" / "x.json")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("--json: ") and len(err.splitlines()) == 1

@@ -741,7 +741,11 @@ def _add_finetune(sub: argparse._SubParsersAction) -> None:
             float,
             "the fitness loses this times the share of its stops with a watchdog intervention",
         ),
-        ("--unscored", int, "unscored (dry) stops a generation, in that excess only"),
+        (
+            "--unscored",
+            int,
+            "unscored (dry) stops a generation, in that excess and the watchdog share only",
+        ),
     ):
         name = flag[2:].replace("-", "_")
         p.add_argument(flag, type=kind, default=None,

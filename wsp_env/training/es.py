@@ -114,7 +114,10 @@ class ESSettings:
     ``unscored``                  0        stops a generation drawn from the pool's unscored
                                            ones (dry rails, where the classical WSP gains
                                            < ``benchmark.MIN_GAIN``): run by every member,
-                                           in the hinge only (the score cannot weigh them)
+                                           in the hinge, the watchdog share and the guard's
+                                           watchdog test, not the score (it cannot weigh
+                                           them); ``history.json``'s ``mean_return_*`` and
+                                           ``watchdog_stops_*`` then count them too
     ============================  =======  ==================================================
 
     ``average`` is Polyak-Ruppert averaging (Polyak & Juditsky 1992, SIAM J. Control Optim.
@@ -170,8 +173,11 @@ class ESSettings:
         u = self.unscored
         if isinstance(u, bool) or not isinstance(u, int) or u < 0:
             raise ValueError(f"unscored: must be a whole number >= 0, got {u!r}")
-        if u and not c:
-            raise ValueError("unscored: counts in the distance hinge only; set ratio_cap too")
+        if u and not (c or self.watchdog_weight):
+            raise ValueError(
+                "unscored: counts in the distance hinge and the watchdog share only; set "
+                "ratio_cap or watchdog_weight"
+            )
 
 
 def actor_layers(model: Any) -> tuple[list[Any], type]:
@@ -631,7 +637,9 @@ def _finetune(
         pool["d_classical"] = classical_distances(base, [int(x) for x in seeds], progress)
         if resume:
             write_json(out / POOL, pool)
-    d_cls = np.array(pool["d_classical"]) if settings.ratio_cap else None
+    d_cls = np.array(pool["d_classical"], dtype=float) if settings.ratio_cap else None
+    if d_cls is not None and not (np.isfinite(d_cls).all() and (d_cls > 0).all()):
+        raise ValueError("pool: d_classical: a stopping distance that is not a positive number")
     if not resume:  # the pool and the settings first, so a run stopped now can be resumed
         write_json(out / POOL, pool)
         write_json(out / SETTINGS, {"settings": asdict(settings), "start_sha256": digest,
@@ -652,7 +660,8 @@ def _finetune(
         returns, watchdog, dist = evaluate_population(start_path, thetas,
                                                       [int(s) for s in seeds[ran]],
                                                       settings.layers)  # fmt: skip
-        # every picked stop is scored; the unscored ones (after them) enter the hinge only
+        # every picked stop is scored; the unscored ones (after them) enter the hinge, the
+        # watchdog share and the guard's watchdog test, not the score
         s, _ = normalised(returns[:, : pick.size], r_none[pick], r_cls[pick])
         score = iqm(s, axis=1)
         if d_cls is not None:
