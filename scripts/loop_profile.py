@@ -60,12 +60,7 @@ def main() -> None:
     kwargs = benchmark_env_kwargs("uic_z1", args.tier)
     kwargs.pop("vehicle")
     max_time_s = kwargs.pop("max_time_s")
-    inner = (
-        make_policy(args.policy, tier=args.tier)
-        if args.policy == "classical"
-        else (make_policy(args.policy))
-    )
-    policy = _Timed(inner)
+    policy = _Timed(make_policy(args.policy, tier=args.tier))  # the tier: classical's only
     start = time.perf_counter()
     run_runs(vehicle, runs, policy, env_kwargs=kwargs, max_time_s=max_time_s,
              policy_keys=POLICY_KEYS)  # fmt: skip

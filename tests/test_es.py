@@ -337,9 +337,9 @@ def test_the_watchdog_weight_turns_the_step_away_from_a_caught_member(start, tmp
 def test_the_distance_hinge_is_the_mean_excess_over_the_cap():
     d_cls = np.array([100.0, 200.0, 400.0])
     d = np.array([[100.0, 200.0, 400.0], [130.0, 190.0, 440.0], [100.0, 300.0, 400.0]])
-    h = es.distance_hinge(d, d_cls, 1.05)
+    h = es.distance_hinge(d / d_cls, 1.05)
     assert np.allclose(h, [0.0, (0.25 + 0.0 + 0.05) / 3, 0.45 / 3])
-    assert np.allclose(es.distance_hinge(d, d_cls, 1.0), [0.0, 0.4 / 3, 0.5 / 3])
+    assert np.allclose(es.distance_hinge(d / d_cls, 1.0), [0.0, 0.4 / 3, 0.5 / 3])
 
 
 def test_a_pool_without_distances_gets_them_and_unscored_stops_enter_the_hinge_not_the_score(

@@ -389,39 +389,34 @@ def training_runs(veh: Any, seeds: list[int], copies: int = 1) -> list[Run]:
 def training_pool(
     start: SB3Policy, n: int, progress: Callable[[str], None] | None = None
 ) -> dict[str, Any]:
-    """The pool's seeds and their locked-wheel and classical returns (the score's ends), for
-    the start's vehicle and sensor tier."""
-    from wsp_env.policy import make_policy
-
-    veh, kwargs, max_time_s, tier = env_setup(start)
+    """The pool's seeds, their locked-wheel and classical returns (the score's ends) and the
+    classical WSP's stopping distances, for the start's vehicle and sensor tier."""
+    veh, _, _, tier = env_setup(start)
     seeds = pool_seeds(n)
-    runs = training_runs(veh, seeds)
     out: dict[str, Any] = {"seeds": seeds, "tier": tier, "vehicle": veh.id}
     for name in ("none", "classical"):
-        if progress is not None:
-            progress(f"pool: {name} on {n} training stops")
-        res, _ = run_runs(veh, runs, make_policy(name, tier=tier), max_time_s=max_time_s,
-                          env_kwargs=kwargs, policy_keys=POLICY_KEYS)  # fmt: skip
+        res = baseline_runs(start, name, seeds, progress)
         out[f"r_{name}"] = [r["return"] for r in res]
         if name == "classical":
             out["d_classical"] = [r["stopping_distance_m"] for r in res]
     return out
 
 
-def classical_distances(
-    start: SB3Policy, seeds: list[int], progress: Callable[[str], None] | None = None
-) -> list[float]:
-    """The classical WSP's stopping distance on each of the pool's ``seeds`` (for a pool
-    written before the pool carried them; ``training_pool`` records them with its returns)."""
+def baseline_runs(
+    start: SB3Policy, name: str, seeds: list[int], progress: Callable[[str], None] | None = None
+) -> list[dict[str, Any]]:
+    """The results of the built-in policy ``name`` (``none``, ``classical``) of the start's
+    sensor tier on the pool's ``seeds``, through the benchmark's runner. ``training_pool`` uses
+    it, and an older pool without the classical WSP's distances gets them from it."""
     from wsp_env.policy import make_policy
 
     veh, kwargs, max_time_s, tier = env_setup(start)
     if progress is not None:
-        progress(f"pool: the classical WSP's stopping distances on {len(seeds)} training stops")
-    res, _ = run_runs(veh, training_runs(veh, seeds), make_policy("classical", tier=tier),
+        progress(f"pool: {name} on {len(seeds)} training stops")
+    res, _ = run_runs(veh, training_runs(veh, seeds), make_policy(name, tier=tier),
                       max_time_s=max_time_s, env_kwargs=kwargs,
                       policy_keys=POLICY_KEYS)  # fmt: skip
-    return [r["stopping_distance_m"] for r in res]
+    return res
 
 
 def _read_pool(path: Path, start: SB3Policy, n: int) -> dict | None:
@@ -507,10 +502,11 @@ def evaluate_population(
     return returns, watchdog, distance_m
 
 
-def distance_hinge(distance_m: np.ndarray, d_classical_m: np.ndarray, cap: float) -> np.ndarray:
-    """Each member's mean over its stops (the last axis) of ``max(0, d / d_classical - cap)``:
-    how far its stops run past ``cap`` times the classical WSP's stopping distance."""
-    return np.maximum(distance_m / d_classical_m - cap, 0.0).mean(axis=-1)
+def distance_hinge(ratio: np.ndarray, cap: float) -> np.ndarray:
+    """Each member's mean over its stops (the last axis) of ``max(0, ratio - cap)``, ``ratio``
+    each stop's distance over the classical WSP's: how far its stops run past ``cap`` times
+    the classical WSP's stopping distance."""
+    return np.maximum(ratio - cap, 0.0).mean(axis=-1)
 
 
 def guarded(s: np.ndarray, watchdog: np.ndarray, guard: float) -> np.ndarray:
@@ -634,7 +630,8 @@ def _finetune(
             f"{settings.unscored} a generation"
         )
     if settings.ratio_cap and "d_classical" not in pool:
-        pool["d_classical"] = classical_distances(base, [int(x) for x in seeds], progress)
+        res = baseline_runs(base, "classical", [int(x) for x in seeds], progress)
+        pool["d_classical"] = [r["stopping_distance_m"] for r in res]
         if resume:
             write_json(out / POOL, pool)
     d_cls = np.array(pool["d_classical"], dtype=float) if settings.ratio_cap else None
@@ -666,7 +663,7 @@ def _finetune(
         score = iqm(s, axis=1)
         if d_cls is not None:
             ratio = dist / d_cls[ran]
-            hinge = distance_hinge(dist, d_cls[ran], settings.ratio_cap)
+            hinge = distance_hinge(ratio, settings.ratio_cap)
         else:
             ratio, hinge = None, np.zeros(len(thetas))
         fitness = score - settings.ratio_weight * hinge
