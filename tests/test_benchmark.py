@@ -129,39 +129,51 @@ def test_registered_ids_fix_vehicle_tier_and_distribution():
     for vehicle in BENCHMARK_VEHICLES:
         load_vehicle(vehicle)  # every id names a vehicle of configs/vehicles
     assert {p.stem for p in (configs_root() / "vehicles").glob("*.yaml")} == set(BENCHMARK_VEHICLES)
-    env = gym.make("WSPBraking-UICZ1-Accel-v2")
+    env = gym.make("WSPBraking-UICZ1-Accel-v3")
     core = env.unwrapped.core
     assert core.accelerometer and core.sensors.accelerometer_bias_mps2 == 0.3
     assert core.scenario.gradient_permille == (-25.0, 25.0) and core.watchdog.enabled
     assert env.observation_space.shape == (24,)
-    venv = gym.make_vec("WSPBraking-ETR1000-v2", num_envs=3)
+    venv = gym.make_vec("WSPBraking-ETR1000-v3", num_envs=3)
     assert not venv.unwrapped.core.accelerometer and venv.unwrapped.core.vehicle.id == "etr1000"
-    assert env_id("regiolis", "wheels+accel") == "WSPBraking-Regiolis-Accel-v2"
+    assert env_id("regiolis", "wheels+accel") == "WSPBraking-Regiolis-Accel-v3"
     obs, _ = venv.reset(seed=0)
     assert obs.shape[0] == 3
     for bad in ({"vehicle": "etr1000"}, {"max_time_s": 5.0}, {"tier": "wheels"}):
         with pytest.raises(ValueError, match="fixes every setting"):
-            gym.make("WSPBraking-UICZ1-v2", **bad)
+            gym.make("WSPBraking-UICZ1-v3", **bad)
 
 
 def test_every_version_of_the_ids_stays_registered_and_differs_only_where_its_history_says():
-    """The package registers exactly ``tiers.ids()`` (every vehicle, tier and version); ``-v1``
-    is ``-v2`` with the watchdog's override standing to standstill (``give_way_locked_s`` 0),
-    every other setting equal; the benchmark scores the current version."""
+    """The package registers exactly ``tiers.ids()`` (every vehicle, tier and version); ``-v2``
+    is ``-v3`` with the estimator's spin-up test on one reading and no accelerometer offset
+    learned, ``-v1`` is ``-v2`` with the watchdog's override standing to standstill
+    (``give_way_locked_s`` 0), every other setting equal; the benchmark scores the current
+    version."""
     from gymnasium.envs.registration import registry
 
     registered = {i for i in registry if i.startswith("WSPBraking-") and i != "WSPBraking-v0"}
-    assert registered == set(ids()) and len(registered) == 2 * 2 * len(BENCHMARK_VEHICLES)
-    assert VERSION == VERSIONS[-1] == "v2" and env_id("uic_z1", "wheels").endswith("-v2")
-    old, new = (benchmark_env_kwargs("uic_z1", "wheels", v) for v in ("v1", "v2"))
-    assert old.pop("watchdog") == {"give_way_locked_s": 0.0} and new.pop("watchdog") is None
-    assert old == new
+    assert registered == set(ids()) and len(registered) == 3 * 2 * len(BENCHMARK_VEHICLES)
+    assert VERSION == VERSIONS[-1] == "v3" and env_id("uic_z1", "wheels").endswith("-v3")
+    v1, v2, v3 = (benchmark_env_kwargs("uic_z1", "wheels", v) for v in VERSIONS)
+    assert v1.pop("watchdog") == {"give_way_locked_s": 0.0} and v2.pop("watchdog") is None
+    assert v3.pop("watchdog") is None
+    old_estimator = {"free_roll_filter_s": 0.0, "accel_offset_gain": 0.0}
+    assert v1.pop("estimator") == v2.pop("estimator") == old_estimator
+    assert v3.pop("estimator") is None
+    assert v1 == v2 == v3
     with pytest.warns(Warning, match="out of date"):
-        v1 = gym.make("WSPBraking-UICZ1-v1")
-    assert v1.unwrapped.core.watchdog.give_way_locked_s == 0.0
-    assert gym.make("WSPBraking-UICZ1-v2").unwrapped.core.watchdog.give_way_locked_s == 0.2
+        made = gym.make("WSPBraking-UICZ1-v1")
+    assert made.unwrapped.core.watchdog.give_way_locked_s == 0.0
+    with pytest.warns(Warning, match="out of date"):
+        made = gym.make("WSPBraking-UICZ1-Accel-v2")
+    est = made.unwrapped.core.estimator
+    assert est.free_roll_filter_s == 0.0 and est.accel_offset_gain == 0.0
+    assert made.unwrapped.core.watchdog.give_way_locked_s == 0.2
+    est = gym.make("WSPBraking-UICZ1-Accel-v3").unwrapped.core.estimator
+    assert est.free_roll_filter_s == 0.1 and est.accel_offset_gain == 0.5
     with pytest.raises(ValueError, match="version"):
-        env_id("uic_z1", "wheels", "v3")
+        env_id("uic_z1", "wheels", "v4")
 
 
 class _Half:
@@ -224,7 +236,7 @@ def test_benchmark_runs_policies_through_one_path_and_refuses_a_foreign_tier(
     assert set(pols["half"]["families"]) == {"rail", "gradient", "speed"}
     assert "watchdog_interventions" in pols["half"]
     assert 0 <= pols["half"]["watchdog_gave_way_runs"] <= pols["half"]["watchdog_runs"]
-    assert (tmp_path / "rep" / "report.md").read_text().startswith("# WSPBraking-UICZ1-v2")
+    assert (tmp_path / "rep" / "report.md").read_text().startswith("# WSPBraking-UICZ1-v3")
 
     accel = _Half()
     accel.env_kwargs = {"accelerometer": True}  # as a model trained with one says

@@ -278,7 +278,7 @@ def test_spec_shows_the_step_limit_and_truncation_keeps_metrics():
     ``max_episode_steps`` itself."""
     assert gym.spec("WSPBraking-v0").max_episode_steps is None
     assert gym.make("WSPBraking-v0").spec.max_episode_steps == 15000  # 300 s / 20 ms
-    assert gym.make("WSPBraking-UICZ1-v2").spec.max_episode_steps == 30000  # 600 s / 20 ms
+    assert gym.make("WSPBraking-UICZ1-v3").spec.max_episode_steps == 30000  # 600 s / 20 ms
     assert gym.make("WSPBraking-v0", max_time_s=60.0).spec.max_episode_steps == 3000
     venv = gym.make_vec("WSPBraking-v0", num_envs=2, vectorization_mode="vector_entry_point")
     assert venv.spec.max_episode_steps == 15000

@@ -26,7 +26,7 @@ def _runs(distances, watchdog=()):
 
 def _write(path, distances, watchdog=(), summary=None):
     runs = {"classical": _runs(CLASSICAL), "p": _runs(distances, watchdog)}
-    data = {"benchmark": "WSPBraking-UICZ1-Accel-v2", "stops": "sealed", "runs": 4,
+    data = {"benchmark": "WSPBraking-UICZ1-Accel-v3", "stops": "sealed", "runs": 4,
             "policies": {"classical": SUMMARY, "p": {**SUMMARY, **(summary or {})}},
             "run_results": runs}  # fmt: skip
     path.write_text(json.dumps(data))

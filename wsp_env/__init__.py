@@ -1,7 +1,7 @@
 """wsp-env: railway wheel slide protection braking — physics core and Gymnasium environment.
 
 Importing the package registers ``WSPBraking-v0`` (every argument free) and the benchmark's ids,
-one per vehicle and sensor tier (``WSPBraking-UICZ1-v2``, ``WSPBraking-UICZ1-Accel-v2``, ...:
+one per vehicle and sensor tier (``WSPBraking-UICZ1-v3``, ``WSPBraking-UICZ1-Accel-v3``, ...:
 ``wsp_env.envs.tiers``), single and native vector entry points; the compiled physics is imported
 lazily, when an environment is made.
 """
@@ -21,7 +21,7 @@ if "WSPBraking-v0" not in registry:
         vector_entry_point="wsp_env.envs:WSPBrakingVectorEnv",
     )
 # every version of the ids (``wsp_env.envs.tiers.VERSIONS``; the latest is the benchmark's)
-for _version in ("v1", "v2"):
+for _version in ("v1", "v2", "v3"):
     for _vehicle, _name in BENCHMARK_VEHICLES.items():
         for _tier, _suffix in (("wheels", ""), ("wheels+accel", "-Accel")):
             _id = f"WSPBraking-{_name}{_suffix}-{_version}"

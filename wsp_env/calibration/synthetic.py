@@ -4,6 +4,14 @@
 samples it like a logger (``evaluation.trace_writer.SensorModel``) and writes only *nominal*
 vehicle data in the metadata — whatever the simulation did differently (a rail condition, a
 gradient, a changed vehicle) stays undeclared, as in measured data.
+
+The WSP in the loop reads the shared reference-speed estimator as it was until the benchmark's
+``-v3`` (``SYNTHETIC_ESTIMATOR``: the spin-up test on one reading, no accelerometer offset
+learned). A measured train's WSP is whatever its maker built; fixing this one keeps the data
+the calibration's tests and its power study were measured on from moving whenever the
+benchmark's estimator does. Under the ``-v3`` estimator the wheels slide elsewhere, and three
+of those tests' margins break (the closing note of 2026-11-27's eleventh session): pass
+``estimator=None`` for the environment's own.
 """
 
 from __future__ import annotations
@@ -15,9 +23,13 @@ from typing import Any
 import numpy as np
 
 from wsp_env.core.config import RailConfig, VehicleConfig, load_vehicle
+from wsp_env.envs.tiers import VERSION_ESTIMATOR
 from wsp_env.evaluation.runner import run_one, trace_metadata
 from wsp_env.evaluation.trace_writer import SensorModel, sample_run, write_trace
 from wsp_env.policy import make_policy
+
+# the synthetic train's WSP estimator (module docstring): -v2's
+SYNTHETIC_ESTIMATOR: dict[str, Any] = dict(VERSION_ESTIMATOR["v2"] or {})
 
 
 def simulate_trace(
@@ -40,6 +52,7 @@ def simulate_trace(
     speed_lag_s: float = 0.0,
     speed_ripple_kmh: float = 0.0,
     return_record: bool = False,
+    estimator: dict[str, Any] | None = SYNTHETIC_ESTIMATOR,
     **case: Any,
 ) -> Any:
     """Simulate, sample and write ``STEM.csv`` + ``STEM.meta.json``; return paths and metrics.
@@ -53,7 +66,9 @@ def simulate_trace(
     CoG and pivot heights (load transfer). ``pressure_lag_s``: the brake force lags the logged
     pressure. ``speed_scale_error`` / ``speed_lag_s``: the ground-speed sensor's scale error and
     lag. ``return_record``: also return the simulator's own record of the stop (the truth the
-    trace was sampled from, adhesion forces included) as a fourth item.
+    trace was sampled from, adhesion forces included) as a fourth item. ``estimator``: the
+    WSP's reference-speed estimator (``EstimatorConfig`` fields; module docstring; None: the
+    environment's default).
     """
     nominal = vehicle if isinstance(vehicle, VehicleConfig) else load_vehicle(vehicle)
     veh = nominal
@@ -81,7 +96,11 @@ def simulate_trace(
         ),
     )
     # nominal everything except what the caller injects
-    env_kwargs = {"extra_rails": {"_synthetic": rail}, "scenario": {"pad_factor": [pad_factor] * 2}}
+    env_kwargs = {
+        "extra_rails": {"_synthetic": rail},
+        "scenario": {"pad_factor": [pad_factor] * 2},
+        "estimator": None if estimator is None else dict(estimator),
+    }
     result, record = run_one(
         veh, "_synthetic", speed_kmh, make_policy(policy, wsp_config), seed, case, env_kwargs
     )

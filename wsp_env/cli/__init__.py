@@ -453,9 +453,11 @@ def _add_benchmark(sub: argparse._SubParsersAction) -> None:
         "same distribution, to compare and select on (default: sealed)",
     )  # fmt: skip
     p.add_argument(
-        "--version", choices=("v1", "v2"), default="v2",
-        help="the ids' version: v2 (default, the current one); v1 reproduces the figures "
-        "measured before 2026-11-27 (the watchdog's override standing until standstill)",
+        "--version", choices=("v1", "v2", "v3"), default="v3",
+        help="the ids' version: v3 (default, the current one); v2 reproduces the figures "
+        "measured under -v2 (the estimator's spin-up test on one reading, no accelerometer "
+        "offset learned), v1 those measured under -v1 (besides, the watchdog's override "
+        "standing until standstill)",
     )  # fmt: skip
     p.add_argument("--json", dest="json_path", default=None, help="write the result here")
     p.add_argument("--report", default=None, help="write report.md into this folder")

@@ -120,7 +120,9 @@ OP_AGE_SCALE = 18  # s: the observed reference age is age / this
 OP_ACTIVE_SLIP = 19  # m/s: a wheel this far below the reference counts as working ...
 OP_ACTIVE_SLIP_REL = 20  # ... or this fraction of the reference, whichever is larger
 OP_WD_GIVE_WAY_S = 21  # s: the override ends once every axle has been locked this long (0: never)
-N_OP = 22
+OP_FREE_ROLL_FILTER_S = 22  # s: the spin-up test's filter on the wheel's acceleration (0: none)
+OP_ACC_OFFSET_GAIN = 23  # share of the accelerometer offset an anchor corrects (0: none)
+N_OP = 24
 
 # per-env sensor parameters (``sensor_par``; drawn per stop, or fixed by reset options)
 SP_WHEEL_NOISE = 0  # m/s: standard deviation of a wheel-speed reading
@@ -144,7 +146,10 @@ W_OVERRIDE = 9  # 1.0 once the minimum-deceleration supervision has overridden t
 # 2.0 once that override has given way (every axle locked under it; no second trip)
 W_SPEED_F = 10  # m/s, the fastest wheel's speed, filtered (the supervision's input)
 W_LOCKED_FOR = 11  # s every axle has been locked while the override stands
-N_W = 12
+W_ACC_CORR = 12  # m/s^2, the accelerometer offset the estimator has learned (added to W_ACC)
+W_VACC = 13  # m/s, the speed dead-reckoned on the corrected accelerometer since its last anchor
+W_VACC_T = 14  # s, the time of that anchor (the stop's start before the first)
+N_W = 15
 
 # per-axle sensor, estimator and watchdog state (``axle_wsp``)
 AW_WHEEL = 0  # m/s, the measured wheel speed
@@ -154,9 +159,13 @@ AW_WD_RELEASED_FOR = 3  # s the axle has been released (watchdog)
 AW_WD_RESTORED = 4  # 1.0 once the watchdog has given the axle its demand back
 AW_VENT_FOR = 5  # s the axle's valve has vented without a break
 AW_VENT_MIN = 6  # m/s, the lowest reading since this vent began
-N_AW = 7
+AW_ACC_FILT = 7  # m/s^2, the wheel's acceleration, filtered over OP_FREE_ROLL_FILTER_S
+N_AW = 8
 
 OBS_CLIP = 5.0
+# m/s^2, the largest accelerometer offset the estimator learns: the benchmark's bias (0.3) and
+# gradient (25 per mille, 0.25) together reach 0.55; more is a fault, not an offset
+ACC_CORR_MAX = 1.0
 MODE_CONTINUOUS = 0
 MODE_DISCRETE = 1
 
@@ -261,18 +270,26 @@ def update_reference(
     follow them down: without an accelerometer it falls at most at ``OP_REF_DECEL_LIMIT``, and
     while the WSP works at an adaptive slope (``OP_REF_ADAPT_MARGIN`` x the deceleration between
     two anchors, within ``[OP_REF_DECEL_MIN, OP_REF_DECEL_LIMIT]``); with an accelerometer at
-    the deceleration it reads (``W_ACC``: gradient, bias, noise and lag included). **Anchors**,
+    the deceleration it reads (``W_ACC``: gradient, bias, noise and lag included) corrected by
+    the offset it has learned (``W_ACC_CORR``: at each anchor at least 2 s after the last, the
+    speed dead-reckoned on the corrected reading since then, ``W_VACC``, missed the anchor by
+    some m/s a second; ``OP_ACC_OFFSET_GAIN`` of that is added, within ``ACC_CORR_MAX``: an
+    integral observer of a constant offset). **Anchors**,
     both ways: a wheel whose cylinder has been below ``OP_FREE_ROLL_BAR`` for
-    ``OP_FREE_ROLL_S`` and which no longer spins up rolls with the train, and the reference is
-    set to it, up or down (the periodic release is how a WSP makes one). A wheel slowing faster
-    than ``OP_REF_DECEL_LIMIT`` (faster than any train) is not free."""
+    ``OP_FREE_ROLL_S`` and which no longer spins up (its acceleration filtered over
+    ``OP_FREE_ROLL_FILTER_S`` below ``OP_FREE_ROLL_ACCEL``) rolls with the train, and the
+    reference is set to it, up or down (the periodic release is how a WSP makes one). A wheel
+    slowing faster than ``OP_REF_DECEL_LIMIT`` (faster than any train) is not free."""
     n_axles = axle_wsp.shape[1]
     fastest = 0.0
     for k in range(n_axles):
         fastest = max(fastest, axle_wsp[e, k, AW_WHEEL])
     v_ref = wsp[e, W_VREF]
-    if obs_par[OP_ACCELEROMETER] > 0.0:
-        fall = min(max(wsp[e, W_ACC], 0.0), 2.0 * obs_par[OP_REF_DECEL_LIMIT])
+    aided = obs_par[OP_ACCELEROMETER] > 0.0
+    if aided:
+        acc = wsp[e, W_ACC] + wsp[e, W_ACC_CORR]
+        wsp[e, W_VACC] = max(wsp[e, W_VACC] - acc * dt, 0.0)
+        fall = min(max(acc, 0.0), 2.0 * obs_par[OP_REF_DECEL_LIMIT])
     elif active:
         fall = wsp[e, W_SLOPE]
     else:
@@ -306,8 +323,17 @@ def update_reference(
         off = axle_wsp[e, k, AW_RELEASED_FOR] >= obs_par[OP_FREE_ROLL_S] - 1e-9 or (
             axle_wsp[e, k, AW_VENT_FOR] >= obs_par[OP_FREE_ROLL_S] - 1e-9 and spun_up
         )
-        # no longer spinning up, nor slowing faster than any train decelerates
-        free = off and -decel < obs_par[OP_FREE_ROLL_ACCEL] and decel < obs_par[OP_REF_DECEL_LIMIT]
+        # no longer spinning up (its acceleration filtered over OP_FREE_ROLL_FILTER_S: one
+        # 20 ms reading of a wheel spinning up slowly on leaves can pass), nor slowing faster
+        # than any train decelerates
+        tau = obs_par[OP_FREE_ROLL_FILTER_S]
+        gain = 1.0 if tau <= dt else dt / tau
+        axle_wsp[e, k, AW_ACC_FILT] += (-decel - axle_wsp[e, k, AW_ACC_FILT]) * gain
+        free = (
+            off
+            and axle_wsp[e, k, AW_ACC_FILT] < obs_par[OP_FREE_ROLL_ACCEL]
+            and decel < obs_par[OP_REF_DECEL_LIMIT]
+        )
         if free:
             anchor = max(anchor, wheel)
     if anchor >= 0.0 and active and demand > 0.0:
@@ -318,6 +344,17 @@ def update_reference(
                 max(obs_par[OP_REF_ADAPT_MARGIN] * est, obs_par[OP_REF_DECEL_MIN]),
                 obs_par[OP_REF_DECEL_LIMIT],
             )
+        if aided:
+            # the accelerometer's offset (bias, and the gradient a specific-force sensor reads)
+            # made the dead-reckoned speed miss the anchor by this much a second; a share of it
+            # is learned (over at least 2 s: the sensor's lag at the brakes' onset is noise)
+            span_acc = t - wsp[e, W_VACC_T]
+            if span_acc >= 2.0 and obs_par[OP_ACC_OFFSET_GAIN] > 0.0:
+                miss = (wsp[e, W_VACC] - anchor) / span_acc
+                corr = wsp[e, W_ACC_CORR] + obs_par[OP_ACC_OFFSET_GAIN] * miss
+                wsp[e, W_ACC_CORR] = min(max(corr, -ACC_CORR_MAX), ACC_CORR_MAX)
+            wsp[e, W_VACC] = anchor
+            wsp[e, W_VACC_T] = t
         v_ref = anchor
         wsp[e, W_ANCHOR_V] = anchor
         wsp[e, W_ANCHOR_T] = t
@@ -505,6 +542,7 @@ def reset_obs(
         axle_wsp[e, k, AW_WD_RESTORED] = 0.0
         axle_wsp[e, k, AW_VENT_FOR] = 0.0
         axle_wsp[e, k, AW_VENT_MIN] = 0.0
+        axle_wsp[e, k, AW_ACC_FILT] = 0.0
     fastest = 0.0
     for k in range(axle_par.shape[1]):
         fastest = max(fastest, axle_wsp[e, k, AW_WHEEL])
@@ -520,6 +558,9 @@ def reset_obs(
     wsp[e, W_OVERRIDE] = 0.0
     wsp[e, W_LOCKED_FOR] = 0.0
     wsp[e, W_SPEED_F] = fastest
+    wsp[e, W_ACC_CORR] = 0.0
+    wsp[e, W_VACC] = fastest
+    wsp[e, W_VACC_T] = 0.0
     for j in range(prev_action.shape[1]):
         prev_action[e, j] = 1.0
     write_obs(

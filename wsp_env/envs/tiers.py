@@ -4,11 +4,13 @@ setting a benchmark score depends on (``wsp-env benchmark``; docs/benchmark.md).
 Two **sensor tiers**, each with its own frozen classical WSP (``baselines.classical``
 ``TIER_CONFIGS``); a controller is only ever compared with the classical WSP of its tier:
 
-* ``wheels`` — wheel-speed sensors only (``WSPBraking-UICZ1-v2``);
-* ``wheels+accel`` — plus a body accelerometer (``WSPBraking-UICZ1-Accel-v2``).
+* ``wheels`` — wheel-speed sensors only (``WSPBraking-UICZ1-v3``);
+* ``wheels+accel`` — plus a body accelerometer (``WSPBraking-UICZ1-Accel-v3``).
 
-Every earlier version stays registered and reproduces its results (``VERSION_WATCHDOG``: ``-v1``
-is ``-v2`` with the watchdog's minimum-deceleration override standing until standstill).
+Every earlier version stays registered and reproduces its results (``VERSION_ESTIMATOR``,
+``VERSION_WATCHDOG``: ``-v2`` is ``-v3`` with the shared estimator's spin-up test on one 20 ms
+reading and no accelerometer offset learned; ``-v1`` is ``-v2`` with the watchdog's
+minimum-deceleration override standing until standstill).
 
 What an id fixes (``benchmark_env_kwargs``): the vehicle; the sensor errors of the tier
 (``TIER_SENSORS``: wheel-speed resolution 0.02 km/h, noise sigma drawn per stop in 0-0.05 km/h
@@ -35,11 +37,18 @@ from wsp_env.core.sensors import SensorConfig
 from wsp_env.envs.wsp_braking import WSPBrakingEnv, WSPBrakingVectorEnv
 
 TIERS = ("wheels", "wheels+accel")
-VERSION = "v2"  # the ids the benchmark scores; every earlier version stays registered
+VERSION = "v3"  # the ids the benchmark scores; every earlier version stays registered
 # what each registered version sets apart from the current one (the environment docstring's
-# version history): v1 is v2 with the watchdog's minimum-deceleration override standing until
-# standstill however the axles lock under it
-VERSION_WATCHDOG: dict[str, dict[str, Any] | None] = {"v1": {"give_way_locked_s": 0.0}, "v2": None}
+# version history): v2 is v3 with the shared estimator's spin-up test on one reading and no
+# accelerometer offset learned; v1 is v2 with the watchdog's minimum-deceleration override
+# standing until standstill however the axles lock under it
+_ESTIMATOR_V2 = {"free_roll_filter_s": 0.0, "accel_offset_gain": 0.0}
+VERSION_ESTIMATOR: dict[str, dict[str, Any] | None] = {
+    "v1": _ESTIMATOR_V2, "v2": _ESTIMATOR_V2, "v3": None,
+}  # fmt: skip
+VERSION_WATCHDOG: dict[str, dict[str, Any] | None] = {
+    "v1": {"give_way_locked_s": 0.0}, "v2": None, "v3": None,
+}  # fmt: skip
 VERSIONS = tuple(VERSION_WATCHDOG)
 
 _WHEELS = SensorConfig(
@@ -101,7 +110,7 @@ def benchmark_env_kwargs(vehicle: str, tier: str, version: str = VERSION) -> dic
         "vehicle": vehicle,
         "accelerometer": tier == "wheels+accel",
         "sensors": dataclasses.asdict(TIER_SENSORS[tier]),
-        "estimator": None,
+        "estimator": copy.deepcopy(VERSION_ESTIMATOR[version]),
         "watchdog": copy.deepcopy(VERSION_WATCHDOG[version]),
         "reward": None,
         "scenario": dataclasses.asdict(BENCHMARK_SCENARIO),
@@ -112,8 +121,8 @@ def benchmark_env_kwargs(vehicle: str, tier: str, version: str = VERSION) -> dic
 
 
 def env_id(vehicle: str, tier: str, version: str = VERSION) -> str:
-    """``WSPBraking-UICZ1-v2`` (tier ``wheels``), ``-Accel-v2`` (tier ``wheels+accel``); an
-    earlier ``version`` names its id (``-v1``)."""
+    """``WSPBraking-UICZ1-v3`` (tier ``wheels``), ``-Accel-v3`` (tier ``wheels+accel``); an
+    earlier ``version`` names its id (``-v1``, ``-v2``)."""
     check_tier(tier)
     check_version(version)
     accel = "-Accel" if tier == "wheels+accel" else ""
@@ -148,7 +157,7 @@ def _resolve(benchmark_id: str, kwargs: dict[str, Any]) -> tuple[str, str, str]:
 def make_benchmark_env(
     benchmark_id: str, render_mode: str | None = None, **kwargs: Any
 ) -> WSPBrakingEnv:
-    """The registered single environment ``benchmark_id`` (``WSPBraking-UICZ1-v2``, ...)."""
+    """The registered single environment ``benchmark_id`` (``WSPBraking-UICZ1-v3``, ...)."""
     vehicle, tier, version = _resolve(benchmark_id, kwargs)
     return WSPBrakingEnv(render_mode=render_mode, **benchmark_env_kwargs(vehicle, tier, version))
 

@@ -280,6 +280,18 @@ num_envs=N, **kwargs)``:
   demand then locked every axle to standstill: on a leaves stop at -18 per mille one policy's
   train ran 16.5 km in the 600 s limit with the override standing, 4.6 km with it giving way. Only stops where that override tripped change; ``info["metrics"]
   ["watchdog"]`` gains ``gave_way``. ``WSPBraking-v0``'s default watchdog changed with it.
+* v3 (2026-11-27, later; the benchmark's ids are ``-v3``, ``-v1`` and ``-v2`` stay registered
+  and reproduce every earlier result): two changes to the shared reference-speed estimator
+  (``EstimatorConfig``; ``-v1`` and ``-v2`` set both to 0). Its spin-up test reads each
+  wheel's acceleration filtered over 0.1 s (``free_roll_filter_s``): on one 20 ms reading a
+  wheel spinning up slowly on leaves passed as free-rolling now and then, the reference was
+  set to it far below the train, and nothing lifted it again (the classical WSP's longest lock
+  on the development stops was 578.6 s). With the accelerometer, it learns the sensor's offset
+  (bias and gradient) at each free-roll anchor (``accel_offset_gain``): the aided reference
+  had run above the train by the offset's integral between anchors. The observation's layout
+  is unchanged (the accelerometer entry is the raw reading); the state arrays gain columns, so
+  an environment checkpoint from before is refused. ``WSPBraking-v0``'s default estimator
+  changed with it.
 """
 
 from __future__ import annotations
