@@ -192,6 +192,12 @@ def test_a_fine_tune_stopped_in_its_first_generation_resumes_and_damage_is_one_l
     (tmp_path / "cut" / es.STATE).write_bytes(b"not a state")
     with pytest.raises(ValueError, match=r"es_state\.npz: not the fine-tune's state"):
         _finetune(None, tmp_path / "cut", 1, resume=True)
+    # a pool of an earlier benchmark version (the classical WSP's returns are not today's)
+    pool = json.loads((tmp_path / "cut" / es.POOL).read_text())
+    assert pool["version"] == es.VERSION
+    (tmp_path / "cut" / es.POOL).write_text(json.dumps({**pool, "version": "v2"}))
+    with pytest.raises(ValueError, match=r"pool\.json: not this fine-tune's pool.*version"):
+        _finetune(None, tmp_path / "cut", 1, resume=True)
     (tmp_path / "cut" / es.POOL).write_text("[1, 2]")
     with pytest.raises(ValueError, match=r"pool\.json: not this fine-tune's pool"):
         _finetune(None, tmp_path / "cut", 1, resume=True)

@@ -51,7 +51,7 @@ from typing import Any
 import numpy as np
 
 from wsp_env.core.config import load_vehicle
-from wsp_env.envs.tiers import benchmark_env_kwargs
+from wsp_env.envs.tiers import VERSION, benchmark_env_kwargs
 from wsp_env.evaluation.benchmark import (
     DAMAGE_CRITERIA,
     POLICY_KEYS,
@@ -390,10 +390,11 @@ def training_pool(
     start: SB3Policy, n: int, progress: Callable[[str], None] | None = None
 ) -> dict[str, Any]:
     """The pool's seeds, their locked-wheel and classical returns (the score's ends) and the
-    classical WSP's stopping distances, for the start's vehicle and sensor tier."""
+    classical WSP's stopping distances, for the start's vehicle and sensor tier under the
+    benchmark's current version (``version``: a pool of another is not reused)."""
     veh, _, _, tier = env_setup(start)
     seeds = pool_seeds(n)
-    out: dict[str, Any] = {"seeds": seeds, "tier": tier, "vehicle": veh.id}
+    out: dict[str, Any] = {"seeds": seeds, "tier": tier, "vehicle": veh.id, "version": VERSION}
     for name in ("none", "classical"):
         res = baseline_runs(start, name, seeds, progress)
         out[f"r_{name}"] = [r["return"] for r in res]
@@ -420,8 +421,10 @@ def baseline_runs(
 
 
 def _read_pool(path: Path, start: SB3Policy, n: int) -> dict | None:
-    """The pool in ``path`` if it is this start's vehicle and tier and ``n`` stops (a first call
-    stopped before its first generation ended, a pool copied from another run), else None."""
+    """The pool in ``path`` if it is this start's vehicle and tier, ``n`` stops and the
+    benchmark's current version (a first call stopped before its first generation ended, a
+    pool copied from another run), else None. A pool without a version was written under
+    ``-v1`` or ``-v2``, whose classical WSP's returns and distances are not today's."""
     if not path.exists():
         return None
     pool = _read_json(path, "pool")
@@ -432,6 +435,7 @@ def _read_pool(path: Path, start: SB3Policy, n: int) -> dict | None:
         pool.get("tier") == tier
         and pool.get("vehicle") == veh.id
         and pool.get("seeds") == pool_seeds(n)
+        and pool.get("version") == VERSION
     )
     ends = [pool.get(k) for k in ("r_none", "r_classical")]
     if "d_classical" in pool:  # optional: pools written before 2026-11-27 lack it
@@ -597,7 +601,10 @@ def _finetune(
     if resume:
         pool = _read_pool(out / POOL, base, settings.pool)
         if pool is None:
-            raise ValueError(f"{out / POOL}: not this fine-tune's pool")
+            raise ValueError(
+                f"{out / POOL}: not this fine-tune's pool (or one of an earlier benchmark "
+                f"version than -{VERSION}: start a new run from the model)"
+            )
         if (out / STATE).exists():
             theta, m, v, done, total = _read_state(out / STATE, theta0.size)
             history = _read_json(out / HISTORY, "history")
