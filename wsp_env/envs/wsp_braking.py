@@ -58,14 +58,14 @@ slip that much, and held from the start of 36 stops (dry and soap, 120-160 km/h,
 wheel-tier sensors) it never brought the watchdog in
 (``scripts/slip_target_study.py --part zero``). With the wheel-sensor tier, six seeds each,
 against its classical WSP (``--part table``): on soap 0.07 at 120 km/h a constant 4 km/h target
-stops 2-5 % shorter with 11-24 % less sliding energy (2 km/h: 3-7 % longer, half the energy);
-on oil at 100 km/h 4-9 % shorter. On leaves at 100 km/h (adhesion 0.029-0.042) one target on
+stops 3-4 % shorter with 10-23 % less sliding energy (2 km/h: 2-5 % longer, half the energy);
+on oil at 100 km/h 4-10 % shorter. On leaves at 100 km/h (adhesion 0.029-0.042) one target on
 every axle keeps all the wheels within the estimator's working band of each other, which the
 minimum-deceleration supervision reads as gripping wheels while the rail gives too little
-deceleration: it trips in 5 of 6 stops at 4 km/h and 1 of 6 at 2 km/h, and its full demand
-locks every axle. The override then gives way; at 2 km/h the stop recovers, at 4 km/h the
-wheels spin up slowly on leaves, the estimator's free-roll anchor (wheel sensors alone) sets
-the reference to one of them far below the train, and the loop brakes them back into a lock
+deceleration: it trips in 4 of 6 stops at 4 km/h and 1 of 6 at 2 km/h, and its full demand
+locks every axle. The override then gives way and the loop vents, but the locked wheels spin
+up at only ~4.5 km/h a second on these leaves, so the watchdog's 10 s safety time runs out
+before they reach the train and restores every axle's full demand to standstill: locked again
 (the longest 260 s) — the targets are the learner's to choose per axle and stop.
 ``SlipTargetPolicy`` runs the same loop with a constant target from outside, in continuous mode,
 bit for bit the same stop. The kernel's previous-action entries hold the loop's valve commands;
