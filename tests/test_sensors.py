@@ -118,7 +118,8 @@ def test_the_shared_reference_is_pulled_down_when_it_drifts_above_the_train():
 
 # the benchmark's wheels+accel sensors (tiers.TIER_SENSORS), the bias fixed by each test
 BENCH_ACCEL = {"accelerometer_noise_mps2": 0.05, "accelerometer_lag_s": 0.1,
-               "wheel_speed_noise_kmh": (0.0, 0.05), "wheel_speed_quantum_kmh": 0.02}  # fmt: skip
+               "wheel_speed_noise_kmh": (0.0, 0.05), "wheel_speed_quantum_kmh": 0.02,
+               "wheel_speed_scale_error": 0.005}  # fmt: skip
 
 
 def _released_every_3_s(bias: float, gradient: float, gain: float):
@@ -146,14 +147,15 @@ def test_the_estimator_learns_the_accelerometer_offset_at_its_anchors(bias, grad
     """A specific-force sensor's offset is its bias less g times the gradient (module
     docstring); the estimator's correction is added to its deceleration reading, so it must
     converge to minus that offset. Within 0.05 m/s^2 after 20 s (six anchors at gain 0.5 leave
-    1/64 of the offset; the readings' noise, 0.05 m/s^2 each, averages over seconds, and the
-    0.1 s lag at the vents' edges is under 0.01 m/s^2 over a 3 s span). Where the offset is
+    1/64 of the offset; the readings' noise, 0.05 m/s^2 each, averages over seconds, the
+    0.1 s lag at the vents' edges is under 0.01 m/s^2 over a 3 s span, and the anchoring
+    wheel's 0.5 % scale error misreads the fall between anchors by 0.5 % of the train's
+    deceleration, under 0.005 m/s^2). Where the offset is
     0.2 m/s^2 or more the reference's mean error falls to under half of what it is without."""
     offset = bias - 9.81 * gradient / 1000.0
     corr, err = _released_every_3_s(bias, gradient, 0.5)
     assert corr == pytest.approx(-offset, abs=0.05)
-    corr_off, err_off = _released_every_3_s(bias, gradient, 0.0)
-    assert corr_off == 0.0
+    _, err_off = _released_every_3_s(bias, gradient, 0.0)
     if abs(offset) >= 0.2:
         assert err < 0.5 * err_off, (err, err_off)
 

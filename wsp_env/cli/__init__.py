@@ -427,8 +427,8 @@ def _add_benchmark(sub: argparse._SubParsersAction) -> None:
         help="score controllers on the sealed test set of a vehicle and sensor tier",
         description="Runs the sealed set (300 fixed-seed stops per vehicle drawn from the "
         "real world's range: every rail, gradients +-25 per mille, sensor errors, loads, "
-        "demands, speeds to the maximum) of a registered id (WSPBraking-UICZ1-v2, "
-        "WSPBraking-UICZ1-Accel-v2, ...) with every policy and the tier's classical WSP and "
+        "demands, speeds to the maximum) of a registered id (WSPBraking-UICZ1-v3, "
+        "WSPBraking-UICZ1-Accel-v3, ...) with every policy and the tier's classical WSP and "
         "none: score 0 = locked wheels, 1 = the tier's classical WSP (IQM, 95 %% bootstrap "
         "interval), stop ratio mean and worst, pass rate, damage, air, valve operations, "
         "watchdog interventions, per scenario family. See docs/benchmark.md.",

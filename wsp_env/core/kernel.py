@@ -327,8 +327,10 @@ def update_reference(
         # 20 ms reading of a wheel spinning up slowly on leaves can pass), nor slowing faster
         # than any train decelerates
         tau = obs_par[OP_FREE_ROLL_FILTER_S]
-        gain = 1.0 if tau <= dt else dt / tau
-        axle_wsp[e, k, AW_ACC_FILT] += (-decel - axle_wsp[e, k, AW_ACC_FILT]) * gain
+        if tau <= dt:  # one reading, exactly (-v1, -v2)
+            axle_wsp[e, k, AW_ACC_FILT] = -decel
+        else:
+            axle_wsp[e, k, AW_ACC_FILT] += (-decel - axle_wsp[e, k, AW_ACC_FILT]) * (dt / tau)
         free = (
             off
             and axle_wsp[e, k, AW_ACC_FILT] < obs_par[OP_FREE_ROLL_ACCEL]

@@ -1,8 +1,8 @@
 """``WSPBraking``: wheel slide protection as a Gymnasium environment (single and native vector).
 
 Registered as ``WSPBraking-v0`` (every argument free) and, for the benchmark, as one id per
-vehicle and sensor tier that fixes every setting a score depends on (``wsp_env.registration``:
-``WSPBraking-UICZ1-v2``, ``WSPBraking-UICZ1-Accel-v2``, ...; each earlier version stays
+vehicle and sensor tier that fixes every setting a score depends on (``wsp_env.envs.tiers``:
+``WSPBraking-UICZ1-v3``, ``WSPBraking-UICZ1-Accel-v3``, ...; each earlier version stays
 registered: Version History).
 
 ## Description
