@@ -10,7 +10,7 @@ The WSP in the loop reads the shared reference-speed estimator as it was until t
 learned). A measured train's WSP is whatever its maker built; fixing this one keeps the data
 the calibration's tests and its power study were measured on from moving whenever the
 benchmark's estimator does. Under the ``-v3`` estimator the wheels slide elsewhere, and three
-of those tests' margins break (the closing note of 2026-11-27's eleventh session): pass
+of those tests' margins break (docs/calibration.md, "Measured on synthetic traces"): pass
 ``estimator=None`` for the environment's own.
 """
 
