@@ -23,13 +23,13 @@ from typing import Any
 import numpy as np
 
 from wsp_env.core.config import RailConfig, VehicleConfig, load_vehicle
-from wsp_env.envs.tiers import VERSION_ESTIMATOR
+from wsp_env.envs.tiers import ESTIMATOR_BEFORE_V3
 from wsp_env.evaluation.runner import run_one, trace_metadata
 from wsp_env.evaluation.trace_writer import SensorModel, sample_run, write_trace
 from wsp_env.policy import make_policy
 
 # the synthetic train's WSP estimator (module docstring): -v2's
-SYNTHETIC_ESTIMATOR: dict[str, Any] = dict(VERSION_ESTIMATOR["v2"] or {})
+SYNTHETIC_ESTIMATOR: dict[str, Any] = dict(ESTIMATOR_BEFORE_V3)
 
 
 def simulate_trace(

@@ -147,9 +147,8 @@ W_OVERRIDE = 9  # 1.0 once the minimum-deceleration supervision has overridden t
 W_SPEED_F = 10  # m/s, the fastest wheel's speed, filtered (the supervision's input)
 W_LOCKED_FOR = 11  # s every axle has been locked while the override stands
 W_ACC_CORR = 12  # m/s^2, the accelerometer offset the estimator has learned (added to W_ACC)
-W_VACC = 13  # m/s, the speed dead-reckoned on the corrected accelerometer since its last anchor
-W_VACC_T = 14  # s, the time of that anchor (the stop's start before the first)
-N_W = 15
+W_VACC = 13  # m/s, the speed dead-reckoned on the corrected accelerometer since the last anchor
+N_W = 14
 
 # per-axle sensor, estimator and watchdog state (``axle_wsp``)
 AW_WHEEL = 0  # m/s, the measured wheel speed
@@ -350,13 +349,12 @@ def update_reference(
             # the accelerometer's offset (bias, and the gradient a specific-force sensor reads)
             # made the dead-reckoned speed miss the anchor by this much a second; a share of it
             # is learned (over at least 2 s: the sensor's lag at the brakes' onset is noise)
-            span_acc = t - wsp[e, W_VACC_T]
-            if span_acc >= 2.0 and obs_par[OP_ACC_OFFSET_GAIN] > 0.0:
-                miss = (wsp[e, W_VACC] - anchor) / span_acc
+            # (``span``: since the last anchor, or the stop's start before the first)
+            if span >= 2.0 and obs_par[OP_ACC_OFFSET_GAIN] > 0.0:
+                miss = (wsp[e, W_VACC] - anchor) / span
                 corr = wsp[e, W_ACC_CORR] + obs_par[OP_ACC_OFFSET_GAIN] * miss
                 wsp[e, W_ACC_CORR] = min(max(corr, -ACC_CORR_MAX), ACC_CORR_MAX)
             wsp[e, W_VACC] = anchor
-            wsp[e, W_VACC_T] = t
         v_ref = anchor
         wsp[e, W_ANCHOR_V] = anchor
         wsp[e, W_ANCHOR_T] = t
@@ -562,7 +560,6 @@ def reset_obs(
     wsp[e, W_SPEED_F] = fastest
     wsp[e, W_ACC_CORR] = 0.0
     wsp[e, W_VACC] = fastest
-    wsp[e, W_VACC_T] = 0.0
     for j in range(prev_action.shape[1]):
         prev_action[e, j] = 1.0
     write_obs(

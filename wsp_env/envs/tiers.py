@@ -7,8 +7,8 @@ Two **sensor tiers**, each with its own frozen classical WSP (``baselines.classi
 * ``wheels`` — wheel-speed sensors only (``WSPBraking-UICZ1-v3``);
 * ``wheels+accel`` — plus a body accelerometer (``WSPBraking-UICZ1-Accel-v3``).
 
-Every earlier version stays registered and reproduces its results (``VERSION_ESTIMATOR``,
-``VERSION_WATCHDOG``: ``-v2`` is ``-v3`` with the shared estimator's spin-up test on one 20 ms
+Every earlier version stays registered and reproduces its results (``VERSION_SETTINGS``:
+``-v2`` is ``-v3`` with the shared estimator's spin-up test on one 20 ms
 reading and no accelerometer offset learned; ``-v1`` is ``-v2`` with the watchdog's
 minimum-deceleration override standing until standstill).
 
@@ -42,14 +42,13 @@ VERSION = "v3"  # the ids the benchmark scores; every earlier version stays regi
 # version history): v2 is v3 with the shared estimator's spin-up test on one reading and no
 # accelerometer offset learned; v1 is v2 with the watchdog's minimum-deceleration override
 # standing until standstill however the axles lock under it
-_ESTIMATOR_V2 = {"free_roll_filter_s": 0.0, "accel_offset_gain": 0.0}
-VERSION_ESTIMATOR: dict[str, dict[str, Any] | None] = {
-    "v1": _ESTIMATOR_V2, "v2": _ESTIMATOR_V2, "v3": None,
-}  # fmt: skip
-VERSION_WATCHDOG: dict[str, dict[str, Any] | None] = {
-    "v1": {"give_way_locked_s": 0.0}, "v2": None, "v3": None,
-}  # fmt: skip
-VERSIONS = tuple(VERSION_WATCHDOG)
+ESTIMATOR_BEFORE_V3: dict[str, Any] = {"free_roll_filter_s": 0.0, "accel_offset_gain": 0.0}
+VERSION_SETTINGS: dict[str, dict[str, dict[str, Any]]] = {
+    "v1": {"estimator": ESTIMATOR_BEFORE_V3, "watchdog": {"give_way_locked_s": 0.0}},
+    "v2": {"estimator": ESTIMATOR_BEFORE_V3},
+    "v3": {},
+}
+VERSIONS = tuple(VERSION_SETTINGS)
 
 _WHEELS = SensorConfig(
     wheel_speed_noise_kmh=(0.0, 0.05),
@@ -110,8 +109,8 @@ def benchmark_env_kwargs(vehicle: str, tier: str, version: str = VERSION) -> dic
         "vehicle": vehicle,
         "accelerometer": tier == "wheels+accel",
         "sensors": dataclasses.asdict(TIER_SENSORS[tier]),
-        "estimator": copy.deepcopy(VERSION_ESTIMATOR[version]),
-        "watchdog": copy.deepcopy(VERSION_WATCHDOG[version]),
+        "estimator": copy.deepcopy(VERSION_SETTINGS[version].get("estimator")),
+        "watchdog": copy.deepcopy(VERSION_SETTINGS[version].get("watchdog")),
         "reward": None,
         "scenario": dataclasses.asdict(BENCHMARK_SCENARIO),
         "control_period_s": 0.02,
