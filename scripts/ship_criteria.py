@@ -65,13 +65,16 @@ def criteria(data: dict[str, Any], policy: str, classical: str = "classical") ->
         _row("mean stop / classical (mean of ratios)", ratio.mean(), STOP_GAIN),
     ]  # fmt: skip
     for label, key in SUMMARY_KEYS:
-        rows.append(_row(label, summary[policy][key], summary[classical][key]))
+        rows.append(_row(label, summary[policy][key], summary[classical][key],
+                         _where_max(key, mine, base, keys, summary[classical][key])))  # fmt: skip
     worst = int(np.argmax(ratio))
     over = int((ratio > WORST_STOP).sum())
     rows.append(_row("worst stop / classical", ratio[worst], WORST_STOP,
                      f"{keys[worst][0]}; {over} stops over"))  # fmt: skip
-    wd = sum(1 for r in runs[policy] if r["watchdog"]["total"] > 0)
-    rows.append(_row("stops with a watchdog intervention", wd, 0))
+    wd = [k for k in keys if mine[k]["watchdog"]["total"] > 0]
+    named = ", ".join(f"{k[0]} ({mine[k]['conditions']['rail']})" for k in wd[:4])
+    rows.append(_row("stops with a watchdog intervention", len(wd), 0,
+                     named + (" ..." if len(wd) > 4 else "")))  # fmt: skip
     for name in RAILS:
         on = rail == name
         if not on.any():
@@ -81,6 +84,19 @@ def criteria(data: dict[str, Any], policy: str, classical: str = "classical") ->
         rows.append(_row(f"{name}: mean stop / classical", d_mine[on].mean() / d_base[on].mean(),
                          1.0, f"{int(on.sum())} stops", strict=True))  # fmt: skip
     return rows
+
+
+def _where_max(key: str, mine: dict, base: dict, keys: list, limit: float) -> str:
+    """For a largest-over-stops criterion: the stop that sets the policy's largest value and
+    how many of its stops exceed the classical WSP's largest, where the file keeps each stop's
+    figure (benchmark files written since 2026-11-27 do: ``benchmark.RUN_FIGURES``); else ""."""
+    field = key.removesuffix("_max")
+    if not key.endswith("_max") or any(field not in mine[k] for k in keys):
+        return ""
+    values = np.array([mine[k][field] for k in keys], dtype=float)
+    top = keys[int(np.argmax(values))]
+    over = int((values > limit).sum())
+    return f"largest on {top[0]} ({mine[top]['conditions']['rail']}); {over} stops over"
 
 
 def _row(name: str, value: float, limit: float, note: str = "", strict: bool = False) -> dict:

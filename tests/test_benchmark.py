@@ -258,6 +258,15 @@ def test_benchmark_runs_policies_through_one_path_and_refuses_a_foreign_tier(
         assert [r["seed"] for r in runs] == [8_260_000, 8_260_001, 8_260_002]
         assert all(r["scenario"].startswith("dev_") for r in runs)
     assert [r["seed"] for r in payload["run_results"]["none"]][:2] == [7_340_000, 7_340_001]
+    # each stop's figures are kept, and the summary's largest and mean are theirs
+    for name, summ in dev["policies"].items():
+        runs = dev["run_results"][name]
+        assert summ["max_lock_s_max"] == max(r["max_lock_s"] for r in runs)
+        assert summ["max_sliding_kmh_max"] == max(r["max_sliding_kmh"] for r in runs)
+        assert summ["air_litres_mean"] == pytest.approx(np.mean([r["air_litres"] for r in runs]))
+        assert summ["sliding_energy_kJ_mean"] == pytest.approx(
+            np.mean([r["sliding_energy_kJ"] for r in runs])
+        )
     with pytest.raises(ValueError, match="stops: 'test' is not one of sealed, development"):
         run_benchmark([make_policy("none")], "uic_z1", "wheels", runs=1, stop_set="test")
     with pytest.raises(ValueError, match="stops: 'test' is not one of"):

@@ -110,3 +110,14 @@ def test_an_unwritable_json_path_is_one_line(tmp_path, capsys):
     assert ship_criteria.main([f, "p", "--json", str(tmp_path / "no" / "x.json")]) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("--json: ") and len(err.splitlines()) == 1
+
+
+def test_the_stop_behind_a_largest_value_is_named_where_kept(tmp_path, capsys):
+    f = _write(tmp_path / "b.json", [80.0, 170.0, 270.0, 800.0], (), {"max_lock_s_max": 2.5})
+    data = json.loads(Path(f).read_text())
+    for r, lock in zip(data["run_results"]["p"], [0.1, 2.5, 2.1, 0.3], strict=True):
+        r["max_lock_s"] = lock
+    Path(f).write_text(json.dumps(data))
+    assert ship_criteria.main([f, "p"]) == 1
+    line = next(ln for ln in capsys.readouterr().out.splitlines() if "longest lock" in ln)
+    assert "FAILS" in line and "largest on s1 (soap); 2 stops over" in line

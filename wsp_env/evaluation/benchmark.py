@@ -53,6 +53,8 @@ SEALED_RUNS = 300
 SEALED_SEED_BASE = 7_340_000  # sealed seeds: SEALED_SEED_BASE + i (no suite comes near)
 # the stop sets of the benchmark's distribution: name -> (first seed, scenario-name prefix)
 STOP_SETS = {"sealed": (SEALED_SEED_BASE, "sealed"), "development": (8_260_000, "dev")}
+# kept in ``run_results`` beside each stop's distance and return (``keep_runs``)
+RUN_FIGURES = ("sliding_energy_kJ", "air_litres", "max_lock_s", "max_sliding_kmh")
 DAMAGE_CRITERIA = {"max_lock_s": 1.0, "max_axle_sliding_energy_pct": 25.0, "max_slide_s": 5.0}
 MIN_GAIN = 0.05  # return units (x 100 m): the classical WSP's least gain for a scored stop
 BOOTSTRAP = 2000
@@ -352,6 +354,9 @@ def run_benchmark(
             name: [
                 {k: r[k] for k in ("scenario", "seed", "stopping_distance_m", "return",
                                    "passed", "stopped", "watchdog", "conditions")}
+                # the per-stop figures behind the summary's means and maxima (item 6's
+                # criteria stop by stop: scripts/ship_criteria.py names the stop of each)
+                | {k: r[k] for k in RUN_FIGURES}
                 | ({"oracle_variant": r["oracle_variant"]} if "oracle_variant" in r else {})
                 for r in res
             ]
