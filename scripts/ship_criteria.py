@@ -66,7 +66,7 @@ def criteria(data: dict[str, Any], policy: str, classical: str = "classical") ->
     ]  # fmt: skip
     for label, key in SUMMARY_KEYS:
         rows.append(_row(label, summary[policy][key], summary[classical][key],
-                         _where_max(key, mine, base, keys, summary[classical][key])))  # fmt: skip
+                         _where_max(key, mine, keys, summary[classical][key])))  # fmt: skip
     worst = int(np.argmax(ratio))
     over = int((ratio > WORST_STOP).sum())
     rows.append(_row("worst stop / classical", ratio[worst], WORST_STOP,
@@ -86,7 +86,7 @@ def criteria(data: dict[str, Any], policy: str, classical: str = "classical") ->
     return rows
 
 
-def _where_max(key: str, mine: dict, base: dict, keys: list, limit: float) -> str:
+def _where_max(key: str, mine: dict, keys: list, limit: float) -> str:
     """For a largest-over-stops criterion: the stop that sets the policy's largest value and
     how many of its stops exceed the classical WSP's largest, where the file keeps each stop's
     figure (benchmark files written since 2026-11-27 do: ``benchmark.RUN_FIGURES``); else ""."""
