@@ -3,12 +3,21 @@
 from __future__ import annotations
 
 import dataclasses
+import os
 
 import numpy as np
 import pytest
 
 from wsp_env.core.config import load_rail, load_vehicle
 from wsp_env.core.simulator import RunSetup, TrainSim
+from wsp_env.threads import ENV_CORES, available_cores
+
+# Under pytest-xdist (`make test` runs one worker a core) each worker gets its share of the
+# cores, so the thread policy (wsp_env.threads) of each sizes numba's and torch's threads to
+# it and the workers do not oversubscribe the machine; a WSP_CORES already set is kept.
+if os.environ.get("PYTEST_XDIST_WORKER_COUNT") and ENV_CORES not in os.environ:
+    _workers = int(os.environ["PYTEST_XDIST_WORKER_COUNT"])
+    os.environ[ENV_CORES] = str(max(1, available_cores() // _workers))
 
 
 def instant_brake(vehicle_id: str = "uic_z1", resistance: bool = False):
@@ -52,13 +61,29 @@ def rng() -> np.random.Generator:
     return np.random.default_rng(1234)
 
 
-@pytest.fixture(scope="session")
-def local_ray():
-    """One local Ray for the tests that split work across workers (each command would
+@pytest.fixture(scope="module")
+def ray_exclusive(tmp_path_factory):
+    """One test module at a time uses Ray on this machine: ``ray stop --force`` (the attach
+    test's clean-up) stops every Ray here, and a process whose Ray is stopped under it exits.
+    A lock file beside the workers' temporary folders (pytest-xdist's workers share that
+    parent) is held for the module; without xdist it orders concurrent pytest runs alike."""
+    import fcntl
+
+    lock = tmp_path_factory.getbasetemp().parent / "ray.lock"
+    with open(lock, "w") as f:
+        fcntl.flock(f, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(f, fcntl.LOCK_UN)
+
+
+@pytest.fixture(scope="module")
+def local_ray(ray_exclusive):
+    """One local Ray for a module's tests that split work across workers (each command would
     otherwise start and stop its own: seconds each); ``ray_session`` uses it as it is. A test
     that must start or attach its own shuts it down first (``test_sweep``'s attach test)."""
     import logging
-    import os
 
     ray = pytest.importorskip("ray")
     os.environ.setdefault("RAY_AUTH_MODE", "disabled")
@@ -69,39 +94,14 @@ def local_ray():
     ray.shutdown()
 
 
-def independent_run(tmp_path, seed, effects=(), edit=None, **overrides):
-    """A trace of the independent generator (``calibration.independent``), written and read
-    back: the scenario of ``seed`` with ``overrides`` (``edit(scenario)`` applied after the
-    draw, before the effects'), its ``effects`` ``(category, magnitude)``. Returns the trace,
-    the scenario, the effects and the generator's columns."""
-    from wsp_env.calibration import independent as ind
-    from wsp_env.calibration.traces import read_trace
-
-    rng = np.random.default_rng(seed)
-    scenario = ind.random_scenario(rng, **overrides)
-    if edit is not None:
-        scenario = edit(scenario)
-    effs = [ind.random_effect(c, m, rng, scenario) for c, m in effects]
-    columns, meta = ind.generate(scenario, effs, seed=seed)
-    csv_path, _ = ind.write_trace(tmp_path / f"t{seed}", columns, meta)
-    return read_trace(csv_path), scenario, effs, columns
-
-
-def independent_trace(tmp_path, seed, effects=(), **overrides):
-    """``independent_run`` without the scenario: the trace, the effects, the columns."""
-    trace, _, effs, columns = independent_run(tmp_path, seed, effects, **overrides)
-    return trace, effs, columns
-
-
-def script(name: str):
-    """The module ``scripts/NAME.py`` (the scripts are no package)."""
-    import importlib
-    import sys
-    from pathlib import Path
-
-    scripts = str(Path(__file__).resolve().parents[1] / "scripts")
-    sys.path.insert(0, scripts)
-    try:
-        return importlib.import_module(name)
-    finally:
-        sys.path.remove(scripts)
+def pytest_collection_modifyitems(config, items):
+    """Modules in an order that keeps pytest-xdist's workers busy to the end (`make test`:
+    ``--dist loadfile --no-loadscope-reorder``, whole modules in this order): the modules with
+    a ``wheel`` test (minutes each) first, so that one worker starts them while the others
+    share the rest; then the modules with the most tests first (xdist's own reordering), so
+    that the suite ends on small ones. Within a module the order is kept."""
+    slow = {item.path for item in items if item.get_closest_marker("wheel")}
+    count: dict = {}
+    for item in items:
+        count[item.path] = count.get(item.path, 0) + 1
+    items.sort(key=lambda item: (item.path not in slow, -count[item.path], str(item.path)))

@@ -13,6 +13,9 @@ pytest.importorskip("ray")
 from wsp_env.cli import main
 from wsp_env.evaluation.distributed import chunks
 
+# one module at a time uses Ray on this machine (conftest.ray_exclusive)
+pytestmark = pytest.mark.usefixtures("ray_exclusive")
+
 
 def test_chunks_cover_in_order():
     for n in (1, 5, 12, 13):

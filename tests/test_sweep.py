@@ -20,6 +20,9 @@ pytest.importorskip("optuna")
 from wsp_env.cli import main
 from wsp_env.sweep.config import load_sweep_config
 
+# one module at a time uses Ray on this machine (conftest.ray_exclusive)
+pytestmark = pytest.mark.usefixtures("ray_exclusive")
+
 SUITE = {
     "name": "tiny", "description": "two short stops", "seeds": [7],
     "cases": [
