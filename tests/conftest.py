@@ -66,7 +66,8 @@ def ray_exclusive(tmp_path_factory):
     """One test module at a time uses Ray on this machine: ``ray stop --force`` (the attach
     test's clean-up) stops every Ray here, and a process whose Ray is stopped under it exits.
     A lock file beside the workers' temporary folders (pytest-xdist's workers share that
-    parent) is held for the module; without xdist it orders concurrent pytest runs alike."""
+    parent) is held for the module (without xdist: beside every plain pytest run's of this
+    user)."""
     import fcntl
 
     lock = tmp_path_factory.getbasetemp().parent / "ray.lock"
@@ -105,3 +106,41 @@ def pytest_collection_modifyitems(config, items):
     for item in items:
         count[item.path] = count.get(item.path, 0) + 1
     items.sort(key=lambda item: (item.path not in slow, -count[item.path], str(item.path)))
+
+
+def independent_run(tmp_path, seed, effects=(), edit=None, **overrides):
+    """A trace of the independent generator (``calibration.independent``), written and read
+    back: the scenario of ``seed`` with ``overrides`` (``edit(scenario)`` applied after the
+    draw, before the effects'), its ``effects`` ``(category, magnitude)``. Returns the trace,
+    the scenario, the effects and the generator's columns."""
+    from wsp_env.calibration import independent as ind
+    from wsp_env.calibration.traces import read_trace
+
+    rng = np.random.default_rng(seed)
+    scenario = ind.random_scenario(rng, **overrides)
+    if edit is not None:
+        scenario = edit(scenario)
+    effs = [ind.random_effect(c, m, rng, scenario) for c, m in effects]
+    columns, meta = ind.generate(scenario, effs, seed=seed)
+    csv_path, _ = ind.write_trace(tmp_path / f"t{seed}", columns, meta)
+    return read_trace(csv_path), scenario, effs, columns
+
+
+def independent_trace(tmp_path, seed, effects=(), **overrides):
+    """``independent_run`` without the scenario: the trace, the effects, the columns."""
+    trace, _, effs, columns = independent_run(tmp_path, seed, effects, **overrides)
+    return trace, effs, columns
+
+
+def script(name: str):
+    """The module ``scripts/NAME.py`` (the scripts are no package)."""
+    import importlib
+    import sys
+    from pathlib import Path
+
+    scripts = str(Path(__file__).resolve().parents[1] / "scripts")
+    sys.path.insert(0, scripts)
+    try:
+        return importlib.import_module(name)
+    finally:
+        sys.path.remove(scripts)

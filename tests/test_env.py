@@ -11,7 +11,9 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import wsp_env  # noqa: F401  (registers WSPBraking-v0)
+from wsp_env import threads
 from wsp_env.core import kernel as K
+from wsp_env.core.kernel import env_step_parallel
 from wsp_env.envs import WSPBrakingEnv, WSPBrakingVectorEnv
 
 VEHICLES = ["uic_z1", "e402b", "etr1000", "regiolis"]
@@ -66,10 +68,14 @@ def test_same_seed_same_trajectory():
 @pytest.mark.parametrize("vehicle,n", [("uic_z1", 4), ("etr1000", 3), ("uic_z1", 70)])
 def test_vector_env_equals_single_envs(vehicle, n):
     """Seeds s..s+N-1 in the vector env give exactly the single envs' trajectories, resets
-    included (short episodes: low speed). N = 70 uses the parallel kernel."""
+    included (short episodes: low speed). N = 70 uses the parallel kernel (the two-core
+    evaluate policy's, whatever share of the cores this test process has)."""
     steps = 400
     scenario = {"speed_kmh": [5.0, 15.0]}
-    venv = WSPBrakingVectorEnv(num_envs=n, vehicle=vehicle, scenario=scenario)
+    policy = threads.thread_policy("evaluate", cores=2)
+    with threads.applied(policy):
+        venv = WSPBrakingVectorEnv(num_envs=n, vehicle=vehicle, scenario=scenario)
+    assert (venv.core._step_fn is env_step_parallel) == (n >= policy.parallel_min_envs)
     singles = [WSPBrakingEnv(vehicle=vehicle, scenario=scenario) for _ in range(n)]
     rng = np.random.default_rng(1)
     acts = rng.uniform(-0.5, 1, size=(steps, n, venv.core.n_valves)).astype(np.float32)

@@ -7,8 +7,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from wsp_env import threads
 from wsp_env.core import kernel as K
 from wsp_env.core.config import ConfigError
+from wsp_env.core.kernel import env_step_parallel
 from wsp_env.envs import WSPBrakingVectorEnv
 from wsp_env.evaluation.runner import run_one
 from wsp_env.physics.integrator import LOCK_TRAIN_SPEED, LOCK_WHEEL_SPEED
@@ -82,7 +84,9 @@ def test_same_seed_same_readings_serial_and_parallel():
     """The noise comes from per-env generators seeded from the env's seed: the same seed gives
     the same readings, and the 64-env parallel step draws what 1-env serial steps draw."""
     sensors = {"wheel_speed_noise_kmh": [0.3, 0.3]}
-    big = WSPBrakingVectorEnv(num_envs=64, sensors=sensors)
+    with threads.applied(threads.thread_policy("evaluate", cores=2)):  # whatever WSP_CORES says
+        big = WSPBrakingVectorEnv(num_envs=64, sensors=sensors)
+    assert big.core._step_fn is env_step_parallel
     big.reset(seed=[100 + i for i in range(64)], options=LEVEL_DRY)
     one = WSPBrakingVectorEnv(num_envs=1, sensors=sensors)
     one.reset(seed=[105], options=LEVEL_DRY)
