@@ -66,8 +66,8 @@ def ray_exclusive(tmp_path_factory):
     """One test module at a time uses Ray on this machine: ``ray stop --force`` (the attach
     test's clean-up) stops every Ray here, and a process whose Ray is stopped under it exits.
     A lock file beside the workers' temporary folders (pytest-xdist's workers share that
-    parent) is held for the module (without xdist: beside every plain pytest run's of this
-    user)."""
+    parent) is held for the module (without xdist: the lock that every plain pytest run of
+    this user shares)."""
     import fcntl
 
     lock = tmp_path_factory.getbasetemp().parent / "ray.lock"
