@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+from collections import Counter
 
 import numpy as np
 import pytest
@@ -102,9 +103,7 @@ def pytest_collection_modifyitems(config, items):
     share the rest; then the modules with the most tests first (xdist's own reordering), so
     that the suite ends on small ones. Within a module the order is kept."""
     slow = {item.path for item in items if item.get_closest_marker("wheel")}
-    count: dict = {}
-    for item in items:
-        count[item.path] = count.get(item.path, 0) + 1
+    count = Counter(item.path for item in items)
     items.sort(key=lambda item: (item.path not in slow, -count[item.path], str(item.path)))
 
 

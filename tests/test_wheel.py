@@ -47,11 +47,11 @@ def built(tmp_path_factory):
         check=True, capture_output=True,
     )  # fmt: skip
     (wheel,) = dist.glob("wsp_env-*.whl")
-    return tmp, wheel
+    return wheel
 
 
 def test_wheel_carries_configs_and_shipped_policies(built):
-    _, wheel = built
+    wheel = built
     names = set(zipfile.ZipFile(wheel).namelist())
     for required in ("wsp_env/configs/wsp/classical.yaml", "wsp_env/configs/scenarios/heldout.yaml",
                      "wsp_env/configs/vehicles/uic_z1.yaml", "wsp_env/configs/rails.yaml",
@@ -138,7 +138,7 @@ class Installed:
 @pytest.fixture(scope="module")
 def venvs(built, tmp_path_factory):
     """Where the fresh install goes (removed afterwards: with the extras about 1.5 GB)."""
-    _, wheel = built
+    wheel = built
     tmp = tmp_path_factory.mktemp("venvs")
     yield tmp, wheel
     t0 = time.perf_counter()
