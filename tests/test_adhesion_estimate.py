@@ -197,3 +197,45 @@ def test_a_six_axle_vehicle_keeps_one_body():
     loads = normal_loads(trace, np.array([1.0, 1.0, 1.0]))
     dn = 40000.0 * 1.5 / 10.0 / 3
     assert loads[0] - loads[0].mean() == pytest.approx([dn] * 3 + [-dn] * 3, rel=1e-12)
+
+
+def test_the_batched_jacobian_fits_bit_for_bit_as_one_evaluation_at_a_time(tmp_path, monkeypatch):
+    """``fit_law`` hands scipy's finite-difference Jacobian a map that evaluates its perturbed
+    parameter vectors in one batch (``BatchedDifferences``): the base law on a soap stop (the
+    plain law, recovery's blend, the cleaning factor and the censored bounds all fitted) comes
+    out bit for bit as with each vector evaluated alone; and the batched peaks are each row's
+    own ``eq9_peak``."""
+    from wsp_env.calibration import adhesion_estimate as ae
+
+    csv_path, _, _ = simulate_trace(
+        tmp_path / "t", load_rail("soap"), 120.0, vehicle="etr1000", pattern="uniform"
+    )
+    trace = read_trace(csv_path)
+    pts, cens = ae.pooled_points(trace), ae.censored_points(trace)
+    assert len(pts) > 50 and len(cens) > 0
+
+    def fits() -> list[np.ndarray]:
+        made: list[np.ndarray] = []
+        real = ae.LawFit
+
+        def record(*args, **kwargs):
+            made.append(args[0].copy())
+            return real(*args, **kwargs)
+
+        with monkeypatch.context() as m:
+            m.setattr(ae, "LawFit", record)
+            ae.fit_base_law(trace, pts, cens)
+        return made
+
+    batched = fits()
+    monkeypatch.setattr(ae.BatchedDifferences, "__call__", lambda self, fun, xs: [
+        self.one(x) for x in xs])  # fmt: skip
+    alone = fits()
+    assert len(batched) == len(alone) > 20  # plain, 2 starts x screened cells, cleaning
+    for a, b in zip(batched, alone, strict=True):
+        np.testing.assert_array_equal(a, b)
+    laws = np.array([[0.08, 60.0, 0.05], [0.03, 5000.0, 0.05], [0.3, 300.0, 0.35]])
+    for speeds in (np.linspace(30.0, 150.0, 7), np.linspace(30.0, 150.0, 300)):
+        rows = ae.eq9_peaks(speeds, laws)
+        for law, row in zip(laws, rows, strict=True):
+            np.testing.assert_array_equal(row, eq9_peak(speeds, *law))
