@@ -7,7 +7,7 @@ mode uses), scored through ``evaluation.benchmark.run_benchmark`` like any other
 the same stops, sensors, watchdog and score.
 
     .venv/bin/python scripts/slip_target_benchmark.py --tier wheels+accel --target 4.25 \\
-        [--target 2 --target 6] [--runs 300] [--stops development] \\
+        [--target 2 --target 6] [--runs 300] [--stops development] [--vehicle regiolis] \\
         [--json runs/bench/slip_constant.json] [--rail-teacher]
 
 ``--rail-teacher`` adds ``baselines.oracle.SlipTargetOracle``: the privileged teacher of the
@@ -22,6 +22,7 @@ import json
 import sys
 from pathlib import Path
 
+from wsp_env import BENCHMARK_VEHICLES
 from wsp_env.baselines.oracle import SlipTargetOracle
 from wsp_env.baselines.slip_target import SlipTargetPolicy
 from wsp_env.cli.printing import print_benchmark
@@ -31,6 +32,7 @@ from wsp_env.evaluation.benchmark import SEALED_RUNS, STOP_SETS, run_benchmark
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--tier", default="wheels+accel", choices=("wheels", "wheels+accel"))
+    ap.add_argument("--vehicle", default="uic_z1", choices=tuple(BENCHMARK_VEHICLES))
     ap.add_argument("--target", type=float, action="append", help="km/h, repeatable")
     ap.add_argument("--runs", type=int, default=SEALED_RUNS)
     ap.add_argument("--stops", choices=tuple(STOP_SETS), default="sealed")
@@ -48,8 +50,8 @@ def main(argv: list[str] | None = None) -> int:
     policies = [SlipTargetPolicy(t) for t in targets]
     if args.rail_teacher:
         policies.append(SlipTargetOracle())
-    result = run_benchmark(policies, tier=args.tier, runs=args.runs, stop_set=args.stops,
-                           keep_runs=args.json_path is not None,
+    result = run_benchmark(policies, vehicle=args.vehicle, tier=args.tier, runs=args.runs,
+                           stop_set=args.stops, keep_runs=args.json_path is not None,
                            progress=lambda m: print(m, file=sys.stderr))  # fmt: skip
     print_benchmark(result)
     if args.json_path:
