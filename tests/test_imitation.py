@@ -19,6 +19,8 @@ PRETRAIN = {
     "teacher": "oracle_peak", "rounds": 2, "steps_per_round": 8192, "warmup_steps": 2048,
     "epochs": 30, "batch_size": 512, "learning_rate": 3e-3,
 }  # fmt: skip
+TABLE = {"teacher": "oracle_target_rail"}
+RAILS = {"soap": 3.0, "leaves": 2.0, "oil": 3.0, "wet": 8.0}  # the default scenario's rails
 
 
 def _teacher_gap(policy: SB3Policy, seed: int) -> float:
@@ -90,6 +92,27 @@ def test_pretraining_moves_the_student_toward_the_teacher(tmp_path):
             "valve fractions), not slip_target",
         ),
         ({"pretrain": {**PRETRAIN, "teacher": "oracle_target_rail"}}, "gives slip targets"),
+        # the slip-target teacher's own table: its teacher, every rail drawn, none other, range
+        (
+            {"pretrain": {**PRETRAIN, "teacher_targets_kmh": {"soap": 3.0}}},
+            "pretrain.teacher_targets_kmh: a table for a slip-target teacher",
+        ),
+        (
+            {"pretrain": {**PRETRAIN, **TABLE, "teacher_targets_kmh": {"soap": 3.0}}},
+            "pretrain.teacher_targets_kmh: no target for rail leaves",
+        ),
+        (
+            {"pretrain": {**PRETRAIN, **TABLE, "teacher_targets_kmh": {**RAILS, "ice": 1.0}}},
+            "pretrain.teacher_targets_kmh.ice: not a rail the scenario draws",
+        ),
+        (
+            {"pretrain": {**PRETRAIN, **TABLE, "teacher_targets_kmh": {**RAILS, "oil": 9.0}}},
+            "pretrain.teacher_targets_kmh.oil: 9.0 km/h is outside the slip-target range",
+        ),
+        (
+            {"pretrain": {**PRETRAIN, **TABLE, "teacher_targets_kmh": {**RAILS, "oil": -1}}},
+            "pretrain.teacher_targets_kmh.oil",
+        ),
     ],
 )
 def test_bad_pretrain_block_is_one_line(tmp_path, capsys, changes, field):
@@ -244,9 +267,10 @@ def test_rail_target_teacher_is_the_constant_target_of_its_rail():
 
 def test_slip_target_student_is_the_imitation_start_handed_over(tmp_path):
     """A slip-target learner (action repeat 4, staggered starts) warm-started by
-    oracle_target_rail: the fit halves its distance to the teacher's targets; every stop the
-    DAgger rounds drive is labelled with its own rail's target (the teacher is reset on each
-    autoreset: a leaves stop after a soap stop is not taught 4.25 km/h); and ``student.zip`` is
+    oracle_target_rail with the config's own table (``pretrain.teacher_targets_kmh``): the fit
+    halves its distance to the teacher's targets; every stop the DAgger rounds drive is labelled
+    with its own rail's target from that table (the teacher is reset on each autoreset: a leaves
+    stop after a soap stop is not taught soap's 3 km/h); and ``student.zip`` is
     exactly the start the hand-over pulls towards (the anchor), not what RL made of it."""
     import torch
 
@@ -264,8 +288,8 @@ def test_slip_target_student_is_the_imitation_start_handed_over(tmp_path):
     labels = []  # (rail of the stop, label) at every teacher call
     real = imitation.make_teacher
 
-    def spy(name):
-        teacher = real(name)
+    def spy(name, targets_kmh=None):
+        teacher = real(name, targets_kmh)
         act = teacher.act
 
         def recorded(obs):
@@ -278,7 +302,8 @@ def test_slip_target_student_is_the_imitation_start_handed_over(tmp_path):
         return teacher
 
     pre = {**PRETRAIN, "teacher": "oracle_target_rail", "steps_per_round": 2048,
-           "warmup_steps": 512, "anchor_coef": 1.0, "anchor_timesteps": 256}  # fmt: skip
+           "warmup_steps": 512, "anchor_coef": 1.0, "anchor_timesteps": 256,
+           "teacher_targets_kmh": {"soap": 3.0, "leaves": 2.0}}  # fmt: skip
     cfg = train_config(
         tmp_path,
         n_timesteps=256,
@@ -293,7 +318,7 @@ def test_slip_target_student_is_the_imitation_start_handed_over(tmp_path):
         assert main(["train", "--config", str(cfg), "--out", str(out), "--no-progress"]) == 0
     finally:
         imitation.make_teacher = real
-    want = {"soap": 0.0, "leaves": -0.6}  # 4.25 and 2 km/h on the 0.5-8 scale
+    want = {"soap": -1.0 / 3.0, "leaves": -0.6}  # the config's 3 and 2 km/h on the 0.5-8 scale
     assert {r for r, _ in labels} == {"soap", "leaves"}
     assert all(abs(a - want[r]) < 1e-6 for r, a in labels)
     record = json.loads((out / "pretrain.json").read_text())

@@ -258,6 +258,8 @@ def parse_train_config(data: Any, source: str = "") -> TrainConfig:
                 f"pretrain: a warm start of the actor-critic of ppo or a2c, not {algo}"
             )
         mode = env_kwargs.get("action_mode", "continuous")
+        if pretrain_cfg.teacher_targets_kmh is not None:
+            _check_teacher_table(pretrain_cfg, env_kwargs)
         if pretrain_cfg.teacher in TARGET_TEACHERS:
             if mode != "slip_target":
                 raise ConfigError(
@@ -391,3 +393,35 @@ def algo_policy_kwargs(cfg: TrainConfig) -> dict[str, Any]:
             "leaky_relu": torch.nn.LeakyReLU, "gelu": torch.nn.GELU,
         }[out["activation_fn"]]  # fmt: skip
     return out
+
+
+def _check_teacher_table(pretrain_cfg: Any, env_kwargs: dict[str, Any]) -> None:
+    """``pretrain.teacher_targets_kmh``: only for a slip-target teacher; one target for every
+    rail the scenario draws and none for a rail it does not; each within the slip-target
+    mode's range (``env_kwargs.slip_target_min_kmh`` .. ``slip_target_max_kmh``)."""
+    from wsp_env.core.braking import ScenarioConfig
+    from wsp_env.training.imitation import TARGET_TEACHERS
+
+    where = "pretrain.teacher_targets_kmh"
+    table = pretrain_cfg.teacher_targets_kmh
+    if pretrain_cfg.teacher not in TARGET_TEACHERS:
+        teachers = ", ".join(TARGET_TEACHERS)
+        raise ConfigError(f"{where}: a table for a slip-target teacher ({teachers}), "
+                          f"not {pretrain_cfg.teacher}")  # fmt: skip
+    scenario = env_kwargs.get("scenario") or {}
+    rails = scenario.get("rails") if isinstance(scenario, dict) else None
+    drawn = sorted(rails if isinstance(rails, dict) else ScenarioConfig().rails)
+    missing = [r for r in drawn if r not in table]
+    if missing:
+        raise ConfigError(f"{where}: no target for rail {missing[0]} (the scenario draws "
+                          f"{', '.join(drawn)})")  # fmt: skip
+    extra = sorted(set(table) - set(drawn))
+    if extra:
+        raise ConfigError(f"{where}.{extra[0]}: not a rail the scenario draws "
+                          f"({', '.join(drawn)})")  # fmt: skip
+    lo = float(env_kwargs.get("slip_target_min_kmh", 0.5))
+    hi = float(env_kwargs.get("slip_target_max_kmh", 8.0))
+    for rail, kmh in table.items():
+        if not lo <= kmh <= hi:
+            raise ConfigError(f"{where}.{rail}: {kmh} km/h is outside the slip-target range "
+                              f"{lo:g}-{hi:g} km/h")  # fmt: skip

@@ -54,6 +54,11 @@ class PretrainConfig:
     """The ``pretrain`` block of a training config (module docstring)."""
 
     teacher: str = field(default="oracle_peak", metadata={"choices": TEACHERS})
+    # oracle_target_rail's table (rail -> km/h of measured slip), every rail the scenario draws;
+    # None: baselines.oracle.RAIL_TARGETS_KMH (chosen on the UIC-Z1's development stops)
+    teacher_targets_kmh: dict[str, float] | None = field(
+        default=None, metadata={"ge": 0.0, "le": 30.0}
+    )
     rounds: int = field(default=6, metadata={"gt": 0})
     steps_per_round: int = field(default=131_072, metadata={"gt": 0})
     warmup_steps: int = field(default=65_536, metadata={"ge": 0})
@@ -70,7 +75,8 @@ class PretrainConfig:
     anchor_epochs: int = field(default=1, metadata={"gt": 0})
 
 
-def make_teacher(name: str) -> Any:
+def make_teacher(name: str, targets_kmh: dict[str, float] | None = None) -> Any:
+    """The teacher ``name`` (``TEACHERS``); ``targets_kmh``: ``oracle_target_rail``'s table."""
     if name == "oracle_peak":
         from wsp_env.baselines.oracle import SlipTracker
 
@@ -82,7 +88,7 @@ def make_teacher(name: str) -> Any:
     if name == "oracle_target_rail":
         from wsp_env.baselines.oracle import SlipTargetTeacher
 
-        return SlipTargetTeacher()
+        return SlipTargetTeacher(targets_kmh)
     from wsp_env.baselines.classical import ClassicalWSP, load_wsp_config
 
     return ClassicalWSP(load_wsp_config())
@@ -94,7 +100,7 @@ def pretrain(model: Any, env: Any, core: Any, cfg: PretrainConfig, gamma: float)
     import torch
 
     norm = _find_wrapper(env, "VecNormalize")
-    teacher = make_teacher(cfg.teacher)
+    teacher = make_teacher(cfg.teacher, cfg.teacher_targets_kmh)
     teacher.bind(core)
     n = core.n_envs
     obs = env.reset()
