@@ -1,0 +1,64 @@
+"""scripts/choose_rail_targets.py: the teacher's table of constant slip targets by rail, chosen
+on development stops under item 6's limits (watchdog, longest lock, worst stop), the limits
+dropped last-first only where no target meets them."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "scripts"))
+import choose_rail_targets
+
+# two rails, two stops each; classical: 100 m, locks up to 0.3 s
+RAILS = ["wet", "wet", "leaves", "leaves"]
+
+
+def _runs(distances, returns, locks=(0.0,) * 4, watchdog=()):
+    return [{"scenario": f"s{i}", "seed": i, "stopping_distance_m": d, "return": r,
+             "max_lock_s": lk, "watchdog": {"total": int(i in watchdog)},
+             "conditions": {"rail": rail}}
+            for i, (d, r, lk, rail) in enumerate(zip(distances, returns, locks, RAILS,
+                                                     strict=True))]  # fmt: skip
+
+
+def _write(path, policies, stops="development"):
+    runs = {"classical": _runs([100.0] * 4, [-5.0] * 4, locks=(0.0, 0.0, 0.3, 0.1)), **policies}
+    path.write_text(json.dumps({"stops": stops, "run_results": runs}))
+    return str(path)
+
+
+def test_the_best_return_within_the_limits_and_limits_dropped_last_first(tmp_path, capsys):
+    a = _write(tmp_path / "a.json", {
+        # wet: 8 km/h returns most but locks 1 s (over the classical WSP's 0.3): 4 is chosen
+        # leaves: 2 km/h brings the watchdog; 3 returns most, a stop 1.2x; 4 meets every limit
+        "slip_target_2kmh": _runs([90.0, 90.0, 50.0, 50.0], [-4.5, -4.5, -1.0, -1.0],
+                                  watchdog=(2,)),
+        "slip_target_3kmh": _runs([95.0, 95.0, 120.0, 60.0], [-4.6, -4.6, -2.0, -2.0]),
+        "slip_target_4kmh": _runs([96.0, 96.0, 90.0, 90.0], [-4.4, -4.4, -3.0, -3.0]),
+    })  # fmt: skip
+    b = _write(tmp_path / "b.json", {
+        "slip_target_8kmh": _runs([90.0, 90.0, 99.0, 99.0], [-4.0, -4.0, -4.0, -4.0],
+                                  locks=(1.0, 0.0, 0.0, 0.0)),
+    })  # fmt: skip
+    assert choose_rail_targets.main([a, b]) == 0
+    out = capsys.readouterr().out
+    assert out.rstrip().endswith("teacher_targets_kmh:\n  leaves: 4\n  wet: 4")
+    # a worst-stop limit no target meets: that limit alone is dropped (leaves: 3 km/h; the
+    # watchdog and lock limits still hold, so not 2 or 8)
+    assert choose_rail_targets.main([a, b, "--worst", "0.85"]) == 0
+    out = capsys.readouterr().out
+    assert out.rstrip().endswith("teacher_targets_kmh:\n  leaves: 3\n  wet: 4")
+    assert out.count("dropped worst stop <= 0.85") == 2
+
+
+def test_a_sealed_file_or_other_stops_are_refused_in_one_line(tmp_path, capsys):
+    sealed = _write(tmp_path / "s.json", {"slip_target_2kmh": _runs([90.0] * 4, [-4.0] * 4)},
+                    stops="sealed")  # fmt: skip
+    assert choose_rail_targets.main([sealed]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "not development" in err
+    none = _write(tmp_path / "n.json", {})
+    assert choose_rail_targets.main([none]) == 2
+    assert "no slip_target_<x>kmh policy" in capsys.readouterr().err
