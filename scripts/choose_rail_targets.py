@@ -10,8 +10,12 @@ stops are merged) and, for each rail, keeps the targets that on that rail's stop
 3. make no stop more than ``--worst`` (1.10) times the classical WSP's,
 
 and picks the one with the best mean return. Where no target passes all three, the last limit
-is dropped first (then the second), and the line says so. Prints each rail's candidates and the
-table as YAML for a config; never reads the sealed set (refuses a file of it).
+is dropped first (then the second, then the first), and the line says so. Prints each rail's
+candidates, then **the teacher with that table**, composed stop by stop from those runs (each
+of its stops is its rail's constant target: ``oracle_target_rail`` runs bit for bit as that,
+``tests/test_imitation.py``): its benchmark score with the 95 % interval and item 6's criteria
+(``ship_criteria.py``) on these stops; then the table as YAML for a config. Never reads the
+sealed set (refuses a file of it); the files must be of one vehicle and tier, each target in one.
 
     .venv/bin/python scripts/choose_rail_targets.py runs/s14/regiolis_targets_dev.json \\
         [runs/s14/more_targets_dev.json] [--worst 1.10]
@@ -27,13 +31,21 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from ship_criteria import criteria
+
+from wsp_env.evaluation.benchmark import score
 
 TARGET = re.compile(r"^slip_target_(\d+(?:\.\d+)?)kmh$")
 
 
-def load(paths: list[str]) -> tuple[dict[tuple, dict], dict[float, dict[tuple, dict]]]:
-    """The classical WSP's runs and each constant target's, keyed by (scenario, seed)."""
-    classical: dict[tuple, dict] = {}
+def _keyed(rows: list[dict]) -> dict[tuple, dict]:
+    return {(r["scenario"], int(r["seed"])): r for r in rows}
+
+
+def load(paths: list[str]) -> tuple[dict[str, Any], dict[float, dict[tuple, dict]]]:
+    """The first file's content (its classical WSP's and locked wheels' runs, its summary) and
+    each constant target's runs, keyed by (scenario, seed)."""
+    first: dict[str, Any] = {}
     targets: dict[float, dict[tuple, dict]] = {}
     for path in paths:
         data = json.loads(Path(path).read_text(encoding="utf-8"))
@@ -42,23 +54,55 @@ def load(paths: list[str]) -> tuple[dict[tuple, dict], dict[float, dict[tuple, d
         if data.get("stops") != "development":
             raise ValueError(f"{path}: stops {data.get('stops')!r}, not development")
         runs = data["run_results"]
-        base = {(r["scenario"], int(r["seed"])): r for r in runs.get("classical", [])}
-        if not base:
-            raise ValueError(f"{path}: no classical runs")
-        if classical and set(base) != set(classical):
-            raise ValueError(f"{path}: not the same stops as {paths[0]}")
-        classical = classical or base
+        if not runs.get("classical") or not runs.get("none"):
+            raise ValueError(f"{path}: no classical or no locked-wheel (none) runs")
+        base = _keyed(runs["classical"])
+        if first:
+            for field in ("vehicle", "tier"):
+                if data.get(field) != first.get(field):
+                    raise ValueError(f"{path}: {field} {data.get(field)!r}, not "
+                                     f"{first.get(field)!r} as {paths[0]}")  # fmt: skip
+            if set(base) != set(_keyed(first["run_results"]["classical"])):
+                raise ValueError(f"{path}: not the same stops as {paths[0]}")
+        else:
+            first = data
         for name, rows in runs.items():
             m = TARGET.match(name)
-            if m:
-                targets[float(m.group(1))] = {(r["scenario"], int(r["seed"])): r for r in rows}
+            if not m:
+                continue
+            if float(m.group(1)) in targets:
+                raise ValueError(f"{path}: {name} is in an earlier file too")
+            keyed = _keyed(rows)
+            if set(keyed) != set(base):
+                raise ValueError(f"{path}: {name} did not run every stop of the classical WSP")
+            targets[float(m.group(1))] = keyed
     if not targets:
         raise ValueError("no slip_target_<x>kmh policy in the files")
-    return classical, targets
+    return first, targets
+
+
+def teacher(first: dict[str, Any], targets: dict, table: dict[str, float]) -> dict[str, Any]:
+    """The teacher with ``table``, stop by stop from the constant targets' runs: its score
+    (``benchmark.score``) and item 6's criteria rows (``ship_criteria.criteria``)."""
+    runs = first["run_results"]
+    keys = sorted(_keyed(runs["classical"]))
+    base, none = _keyed(runs["classical"]), _keyed(runs["none"])
+    mine = [targets[table[base[k]["conditions"]["rail"]]][k] for k in keys]
+    ret = np.array([r["return"] for r in mine])
+    result = score(ret, np.array([none[k]["return"] for k in keys]),
+                   np.array([base[k]["return"] for k in keys]))  # fmt: skip
+    summary = {"sliding_energy_kJ_mean": float(np.mean([r["sliding_energy_kJ"] for r in mine])),
+               "air_litres_mean": float(np.mean([r["air_litres"] for r in mine])),
+               "max_lock_s_max": float(max(r["max_lock_s"] for r in mine)),
+               "max_sliding_kmh_max": float(max(r["max_sliding_kmh"] for r in mine))}  # fmt: skip
+    data = {"policies": {"classical": first["policies"]["classical"], "teacher": summary},
+            "run_results": {"classical": runs["classical"], "teacher": mine}}  # fmt: skip
+    return {**result, "criteria": criteria(data, "teacher")}
 
 
 def choose(classical: dict, targets: dict, worst_limit: float) -> dict[str, dict[str, Any]]:
-    """Per rail: every target's figures and the choice (module docstring)."""
+    """Per rail: every target's figures and the choice (module docstring); ``classical``: the
+    classical WSP's runs keyed by (scenario, seed)."""
     lock_limit = max(r["max_lock_s"] for r in classical.values())
     rails = sorted({r["conditions"]["rail"] for r in classical.values()})
     out: dict[str, dict[str, Any]] = {}
@@ -98,12 +142,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--worst", type=float, default=1.10, help="worst stop / classical limit")
     args = ap.parse_args(argv)
     try:
-        classical, targets = load(args.benchmark_json)
+        first, targets = load(args.benchmark_json)
+        table = choose(_keyed(first["run_results"]["classical"]), targets, args.worst)
+        taught = teacher(first, targets, {rail: info["choice"] for rail, info in table.items()})
     except (OSError, ValueError, KeyError, TypeError) as err:
         msg = str(err) if isinstance(err, ValueError) else f"{type(err).__name__}: {err}"
         print(f"choose_rail_targets: {msg}", file=sys.stderr)
         return 2
-    table = choose(classical, targets, args.worst)
     for rail, info in table.items():
         print(f"{rail} ({info['stops']} stops)")
         for r in info["rows"]:
@@ -114,6 +159,15 @@ def main(argv: list[str] | None = None) -> int:
                   f"{r['longest_lock_s']:.2f} s")  # fmt: skip
         if info["dropped"]:
             print(f"     no target meets every limit: dropped {', '.join(info['dropped'])}")
+    lo, hi = taught["score_ci95"] or (float("nan"), float("nan"))
+    print(f"the teacher with this table on these stops: score {taught['score']:.4f} "
+          f"({lo:.4f}-{hi:.4f}); item 6's criteria:")  # fmt: skip
+    for r in taught["criteria"]:
+        value = "-" if r["value"] is None else f"{r['value']:.4g}"
+        mark = "holds" if r["holds"] else "FAILS"
+        print(f"  {mark:5s}  {r['criterion']}: {value} against {r['limit']:.4g}")
+    held = sum(r["holds"] for r in taught["criteria"])
+    print(f"  {held} of {len(taught['criteria'])} criteria hold")
     print("teacher_targets_kmh:")
     for rail, info in table.items():
         print(f"  {rail}: {info['choice']:g}")

@@ -18,14 +18,23 @@ RAILS = ["wet", "wet", "leaves", "leaves"]
 def _runs(distances, returns, locks=(0.0,) * 4, watchdog=()):
     return [{"scenario": f"s{i}", "seed": i, "stopping_distance_m": d, "return": r,
              "max_lock_s": lk, "watchdog": {"total": int(i in watchdog)},
-             "conditions": {"rail": rail}}
+             "conditions": {"rail": rail}, "sliding_energy_kJ": 10.0, "air_litres": 5.0,
+             "max_sliding_kmh": 4.0}
             for i, (d, r, lk, rail) in enumerate(zip(distances, returns, locks, RAILS,
                                                      strict=True))]  # fmt: skip
 
 
-def _write(path, policies, stops="development"):
-    runs = {"classical": _runs([100.0] * 4, [-5.0] * 4, locks=(0.0, 0.0, 0.3, 0.1)), **policies}
-    path.write_text(json.dumps({"stops": stops, "run_results": runs}))
+CLASSICAL = {"sliding_energy_kJ_mean": 20.0, "air_litres_mean": 10.0, "max_lock_s_max": 0.3,
+             "max_sliding_kmh_max": 5.0}  # fmt: skip
+
+
+def _write(path, policies, stops="development", vehicle="regiolis"):
+    runs = {"none": _runs([300.0] * 4, [-15.0] * 4),
+            "classical": _runs([100.0] * 4, [-5.0] * 4, locks=(0.0, 0.0, 0.3, 0.1)),
+            **policies}  # fmt: skip
+    path.write_text(json.dumps({"stops": stops, "vehicle": vehicle, "tier": "wheels+accel",
+                                "policies": {"classical": CLASSICAL},
+                                "run_results": runs}))  # fmt: skip
     return str(path)
 
 
@@ -45,6 +54,14 @@ def test_the_best_return_within_the_limits_and_limits_dropped_last_first(tmp_pat
     assert choose_rail_targets.main([a, b]) == 0
     out = capsys.readouterr().out
     assert out.rstrip().endswith("teacher_targets_kmh:\n  leaves: 4\n  wet: 4")
+    # the teacher with that table, stop by stop 4 km/h: returns (-4.4, -4.4, -3, -3) between
+    # locked wheels (-15) and the classical WSP (-5): normalised 1.06, 1.06, 1.2, 1.2, IQM 1.13;
+    # stops 0.96, 0.96, 0.9, 0.9 of the classical WSP's (both readings 0.93: fail), no soap or
+    # soap_etr1000 stop (both fail), the rest hold
+    assert "the teacher with this table on these stops: score 1.1300" in out
+    assert "FAILS  mean stop / classical (mean of ratios): 0.93 against 0.9" in out
+    assert "holds  longest lock [s]: 0 against 0.3" in out
+    assert "6 of 10 criteria hold" in out
     # a worst-stop limit no target meets: that limit alone is dropped (leaves: 3 km/h; the
     # watchdog and lock limits still hold, so not 2 or 8)
     assert choose_rail_targets.main([a, b, "--worst", "0.85"]) == 0
@@ -62,3 +79,14 @@ def test_a_sealed_file_or_other_stops_are_refused_in_one_line(tmp_path, capsys):
     none = _write(tmp_path / "n.json", {})
     assert choose_rail_targets.main([none]) == 2
     assert "no slip_target_<x>kmh policy" in capsys.readouterr().err
+    # files of two vehicles, a target in two files, a target short of a stop
+    one = _write(tmp_path / "1.json", {"slip_target_2kmh": _runs([90.0] * 4, [-4.0] * 4)})
+    other = _write(tmp_path / "2.json", {"slip_target_3kmh": _runs([90.0] * 4, [-4.0] * 4)},
+                   vehicle="uic_z1")  # fmt: skip
+    short = _write(tmp_path / "3.json", {"slip_target_4kmh": _runs([90.0] * 4, [-4.0] * 4)[:3]})
+    for files, says in (([one, other], "vehicle 'uic_z1', not 'regiolis'"),
+                        ([one, one], "slip_target_2kmh is in an earlier file too"),
+                        ([short], "did not run every stop")):  # fmt: skip
+        assert choose_rail_targets.main(files) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and says in err, err

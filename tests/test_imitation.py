@@ -103,7 +103,7 @@ def test_pretraining_moves_the_student_toward_the_teacher(tmp_path):
         ),
         (
             {"pretrain": {**PRETRAIN, **TABLE, "teacher_targets_kmh": {**RAILS, "ice": 1.0}}},
-            "pretrain.teacher_targets_kmh.ice: not a rail the scenario draws",
+            "pretrain.teacher_targets_kmh.ice: not a rail the scenario names",
         ),
         (
             {"pretrain": {**PRETRAIN, **TABLE, "teacher_targets_kmh": {**RAILS, "oil": 9.0}}},
@@ -323,6 +323,7 @@ def test_slip_target_student_is_the_imitation_start_handed_over(tmp_path):
     assert all(abs(a - want[r]) < 1e-6 for r, a in labels)
     record = json.loads((out / "pretrain.json").read_text())
     assert record["teacher"] == "oracle_target_rail"
+    assert record["teacher_targets_kmh"] == {"soap": 3.0, "leaves": 2.0}
     first = record["rounds"][0]
     assert first["data_mae_after_fit"] < 0.5 * first["data_mae_before_fit"]
     student = SB3Policy(out / "student.zip")

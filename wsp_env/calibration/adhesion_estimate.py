@@ -415,7 +415,9 @@ class BatchedDifferences:
     is the residuals at one vector (the optimiser's own evaluations), and the object is the
     map-like ``workers`` through which scipy's finite-difference Jacobian (``'2-point'``, its
     steps and quotients unchanged) evaluates its ``n_params`` perturbed vectors: here all in one
-    batched call instead of one call each (the Jacobian was 80 % of a fit's evaluations)."""
+    batched call instead of one call each (the Jacobian was 80 % of a fit's evaluations). For
+    real steps only (``jac='2-point'`` or ``'3-point'``, not ``'cs'``): it ignores scipy's
+    ``fun`` and evaluates the vectors itself."""
 
     def __init__(self, residuals: Callable[[np.ndarray], np.ndarray]) -> None:
         self.residuals = residuals

@@ -397,8 +397,9 @@ def algo_policy_kwargs(cfg: TrainConfig) -> dict[str, Any]:
 
 def _check_teacher_table(pretrain_cfg: Any, env_kwargs: dict[str, Any]) -> None:
     """``pretrain.teacher_targets_kmh``: only for a slip-target teacher; one target for every
-    rail the scenario draws and none for a rail it does not; each within the slip-target
-    mode's range (``env_kwargs.slip_target_min_kmh`` .. ``slip_target_max_kmh``)."""
+    rail the scenario draws (a rail of weight 0 may have one) and none for a rail it does not
+    name; each within the slip-target mode's range (``env_kwargs.slip_target_min_kmh`` ..
+    ``slip_target_max_kmh``; a malformed scenario or range is the environment's to refuse)."""
     from wsp_env.core.braking import ScenarioConfig
     from wsp_env.training.imitation import TARGET_TEACHERS
 
@@ -410,18 +411,26 @@ def _check_teacher_table(pretrain_cfg: Any, env_kwargs: dict[str, Any]) -> None:
                           f"not {pretrain_cfg.teacher}")  # fmt: skip
     scenario = env_kwargs.get("scenario") or {}
     rails = scenario.get("rails") if isinstance(scenario, dict) else None
-    drawn = sorted(rails if isinstance(rails, dict) else ScenarioConfig().rails)
+    weights = rails if isinstance(rails, dict) else ScenarioConfig().rails
+    named = sorted(weights)
+    drawn = [r for r in named if not _number(weights[r]) or weights[r] > 0]
     missing = [r for r in drawn if r not in table]
     if missing:
         raise ConfigError(f"{where}: no target for rail {missing[0]} (the scenario draws "
                           f"{', '.join(drawn)})")  # fmt: skip
-    extra = sorted(set(table) - set(drawn))
+    extra = sorted(set(table) - set(named))
     if extra:
-        raise ConfigError(f"{where}.{extra[0]}: not a rail the scenario draws "
-                          f"({', '.join(drawn)})")  # fmt: skip
-    lo = float(env_kwargs.get("slip_target_min_kmh", 0.5))
-    hi = float(env_kwargs.get("slip_target_max_kmh", 8.0))
+        raise ConfigError(f"{where}.{extra[0]}: not a rail the scenario names "
+                          f"({', '.join(named)})")  # fmt: skip
+    lo = env_kwargs.get("slip_target_min_kmh", 0.5)
+    hi = env_kwargs.get("slip_target_max_kmh", 8.0)
+    if not (_number(lo) and _number(hi)):
+        return
     for rail, kmh in table.items():
         if not lo <= kmh <= hi:
             raise ConfigError(f"{where}.{rail}: {kmh} km/h is outside the slip-target range "
                               f"{lo:g}-{hi:g} km/h")  # fmt: skip
+
+
+def _number(x: Any) -> bool:
+    return isinstance(x, int | float) and not isinstance(x, bool)

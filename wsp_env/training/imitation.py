@@ -174,8 +174,10 @@ def pretrain(model: Any, env: Any, core: Any, cfg: PretrainConfig, gamma: float)
     model._last_obs = obs  # the first rollout continues from here
     model._last_episode_starts = dones
     env_steps = (warm + cfg.rounds * steps) * n
-    return {"teacher": cfg.teacher, "env_steps": int(env_steps), "warmup_steps": int(warm * n),
-            "warmup_episodes_min": int(finished.min()), "rounds": history}  # fmt: skip
+    table = getattr(teacher, "table", None)  # oracle_target_rail's targets, as it used them
+    return {"teacher": cfg.teacher, "teacher_targets_kmh": table, "env_steps": int(env_steps),
+            "warmup_steps": int(warm * n), "warmup_episodes_min": int(finished.min()),
+            "rounds": history}  # fmt: skip
 
 
 WARMUP_STOP_STEPS_MAX = 30_000  # per environment: twice the longest stop (600 s at 20 ms)
