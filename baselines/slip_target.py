@@ -45,7 +45,15 @@ what the sensor model measures) — exactly as the classical WSP (``classical.py
   has gone ``periodic_release_interval_s`` without an anchor (its observed age) and as long
   since the last release began, one axle in turn, from the last, is vented for at least
   ``periodic_release_duration_s`` and on until it stops spinning up and the estimator has
-  anchored on it, at most ``periodic_release_max_s``;
+  anchored on it, at most ``periodic_release_max_s``. As in the classical WSP, a release
+  begins only while the loop works (``release="working"``: some axle's request was under the
+  full demand in the last period, or a wheel's measured slip is beyond the estimator's working
+  band, ``max(active_slip_kmh, active_slip_rel v_ref)``, as the kernel judges that the WSP
+  works): on a stop where no wheel slides the reference's age still
+  counts (the loop's request dips under the demand while the cylinders fill at the brakes'
+  onset, and the estimator then counts the age until an anchor), and an ungated release
+  (``release="always"``, the loop before 2026-11-27) vented one axle after another of a train
+  whose wheels all gripped (a wet Régiolis stop at 3 km/h: three axles, 97.3 m against 95.9 m);
 * a valve of several axles (bogie valves) asks for its most cautious axle's request.
 
 The commands are continuous valve actions (``2 f - 1``), so the loop can drive any continuous
@@ -65,7 +73,9 @@ import numpy as np
 
 from wsp_env.baselines.classical import ArrayState, PeriodicRelease, WSPConfig
 from wsp_env.core import kernel as K
-from wsp_env.core.config import check_number
+from wsp_env.core.config import ConfigError, check_number
+
+RELEASE_GATES = ("working", "always")
 
 
 def check_loop_args(gain_per_kmh: Any, lead_s: Any) -> tuple[float, float]:
@@ -76,19 +86,39 @@ def check_loop_args(gain_per_kmh: Any, lead_s: Any) -> tuple[float, float]:
     return gain, check_number(lead_s, "slip_target_lead_s", ge=0.0, le=1.0)
 
 
+def check_release(release: Any) -> str:
+    """The periodic release's gate (``RELEASE_GATES``), or a one-line ``ConfigError`` naming the
+    environment argument ``slip_target_release``."""
+    if not isinstance(release, str) or release not in RELEASE_GATES:
+        raise ConfigError(
+            f"slip_target_release: must be one of {', '.join(RELEASE_GATES)}, got {release!r}"
+        )
+    return release
+
+
 class SlipTargetLoop(ArrayState, PeriodicRelease):
     """Valve commands that track per-valve target sliding speeds (module docstring). ``wsp``:
     the classical WSP's thresholds it reuses (recovery, minimum speed, periodic release; the
-    frozen file of the sensor tier in the environment, ``envs.make_core``)."""
+    frozen file of the sensor tier in the environment, ``envs.make_core``); ``release``: when a
+    periodic release may begin (``RELEASE_GATES``): ``"working"``, only while the loop works
+    (some axle's request was under the full demand in the last period, or a wheel's measured
+    slip is beyond the estimator's working band: the kernel's test that the WSP works), as the
+    classical WSP only while it is active;
+    ``"always"``, whenever the reference's age allows (the loop before 2026-11-27)."""
 
     name = "slip_target_loop"
     privileged = False
 
     def __init__(
-        self, wsp: WSPConfig | None = None, gain_per_kmh: float = 0.2, lead_s: float = 0.1
+        self,
+        wsp: WSPConfig | None = None,
+        gain_per_kmh: float = 0.2,
+        lead_s: float = 0.1,
+        release: str = "working",
     ) -> None:
         self.cfg = wsp or WSPConfig()
         self.gain_per_kmh, self.lead_s = check_loop_args(gain_per_kmh, lead_s)
+        self.release = check_release(release)
 
     def bind(self, core: Any) -> None:
         """Attach to a ``BrakingCore``: its scales, valve map and batch size."""
@@ -104,9 +134,16 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         self._release_init(n, next_axle=na - 1)
         self.since_release[:] = np.inf
         self.vent = np.zeros((n, na), dtype=bool)  # this period's periodic-release vents
+        # some axle's request under the full demand in the last period (``command``): the loop
+        # works, and a periodic release may begin (``release="working"``)
+        self.working = np.zeros(n, dtype=bool)
         # the reference's deceleration over the last period (m/s^2; NaN: no period yet), its
         # speed and age then (the lead's relative term, ``advance``)
         self.ref_limit = float(core.obs_par[K.OP_REF_DECEL_LIMIT])
+        # the estimator's working band: a wheel this far below the reference slips (m/s, and a
+        # fraction of the reference), as the kernel judges that the WSP works
+        self.active_slip = float(core.obs_par[K.OP_ACTIVE_SLIP])
+        self.active_slip_rel = float(core.obs_par[K.OP_ACTIVE_SLIP_REL])
         self.decel_ref = np.zeros(n)
         self.prev_ref = np.full(n, np.nan)
         self.prev_age = np.zeros(n)
@@ -116,6 +153,7 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         """Environments ``env_ids`` start a new stop."""
         self._release_reset(env_ids, self.n_axles)
         self.vent[env_ids] = False
+        self.working[env_ids] = False
         self.decel_ref[env_ids] = 0.0
         self.prev_ref[env_ids] = np.nan
         self.prev_age[env_ids] = 0.0
@@ -139,13 +177,22 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         self.decel_ref = np.where(known, np.clip(slope, 0.0, self.ref_limit), self.decel_ref)
         self.prev_ref, self.prev_age = v_ref, age
         self.vent[...] = False
-        rows, axles = self._release_step(age, decel, dt)
+        allowed = None
+        if self.release == "working":  # the loop works: it asked for under the demand in the
+            # last period, or a wheel slips beyond the estimator's working band now
+            v = obs[:, :na].astype(np.float64) * self.v_scale
+            band = np.maximum(self.active_slip, self.active_slip_rel * v_ref)
+            allowed = self.working | ((v_ref[:, None] - v) > band[:, None]).any(axis=1)
+        rows, axles = self._release_step(age, decel, dt, allowed)
         self.vent[rows, axles] = True
 
     def command(self, obs: np.ndarray, target_kmh: np.ndarray) -> np.ndarray:
         """Valve actions ``(n_envs, n_valves)`` (float64 in [-1, 1], the continuous action
         space) that track ``target_kmh`` (``(n_envs, n_valves)``, km/h of measured slip) on the
-        kernel's observation ``obs``; pure: the state as ``advance`` left it."""
+        kernel's observation ``obs``, on the state as ``advance`` left it; its one write is
+        whether the loop works (``working``: some axle's own request, before the periodic
+        release's vents, under the full demand), which the next ``advance`` reads, so calling
+        it twice in a period with the same arguments changes nothing."""
         cfg, na = self.cfg, self.n_axles
         v = obs[:, :na].astype(np.float64) * self.v_scale
         decel = obs[:, na : 2 * na].astype(np.float64) * self.a_scale
@@ -160,8 +207,10 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         frac = hold + self.gain_per_kmh * (target - 3.6 * slip_ahead)
         frac = np.where(-decel > cfg.accel_hold_mps2, np.maximum(frac, hold), frac)
         frac = np.clip(frac, 0.0, 1.0)
+        slow = v_ref[:, 0] < cfg.min_speed_kmh / 3.6
+        self.working = (frac < 1.0 - 1e-6).any(axis=1) & ~slow
         frac[self.vent] = 0.0
-        frac[v_ref[:, 0] < cfg.min_speed_kmh / 3.6] = 1.0
+        frac[slow] = 1.0
         valve = np.minimum.reduceat(frac, self.valve_starts, axis=1)
         return 2.0 * valve - 1.0
 
@@ -181,7 +230,9 @@ class SlipTargetPolicy:
     def __init__(self, target_kmh: float, loop: SlipTargetLoop | None = None) -> None:
         self.target_kmh = float(target_kmh)
         self.loop = loop or SlipTargetLoop()
-        self.name = f"slip_target_{self.target_kmh:g}kmh"
+        # the loop's release gate in the name where it is not the default
+        gate = "" if self.loop.release == "working" else f"_{self.loop.release}"
+        self.name = f"slip_target_{self.target_kmh:g}kmh{gate}"
 
     def bind(self, core: Any) -> None:
         self.loop.bind(core)

@@ -8,7 +8,7 @@ the same stops, sensors, watchdog and score.
 
     .venv/bin/python scripts/slip_target_benchmark.py --tier wheels+accel --target 4.25 \\
         [--target 2 --target 6] [--runs 300] [--stops development] [--vehicle regiolis] \\
-        [--json runs/bench/slip_constant.json] [--rail-teacher]
+        [--json runs/bench/slip_constant.json] [--rail-teacher] [--release always]
 
 ``--rail-teacher`` adds ``baselines.oracle.SlipTargetOracle``: the privileged teacher of the
 imitation start (``oracle_target_rail``: each stop's constant target picked by its rail, which
@@ -24,7 +24,7 @@ from pathlib import Path
 
 from wsp_env import BENCHMARK_VEHICLES
 from wsp_env.baselines.oracle import SlipTargetOracle
-from wsp_env.baselines.slip_target import SlipTargetPolicy
+from wsp_env.baselines.slip_target import RELEASE_GATES, SlipTargetLoop, SlipTargetPolicy
 from wsp_env.cli.printing import print_benchmark
 from wsp_env.evaluation.benchmark import SEALED_RUNS, STOP_SETS, run_benchmark
 
@@ -42,12 +42,22 @@ def main(argv: list[str] | None = None) -> int:
         action="store_true",
         help="also the privileged oracle_target_rail (one target a stop by its rail)",
     )
+    ap.add_argument(
+        "--release",
+        action="append",
+        choices=RELEASE_GATES,
+        help="the loop's periodic-release gate (repeatable: each target under each; default "
+        "working)",
+    )
     args = ap.parse_args(argv)
     targets = args.target or [4.25]
     if any(not 0.0 <= t <= 30.0 for t in targets):
         print("--target: a sliding speed in [0, 30] km/h", file=sys.stderr)
         return 2
-    policies = [SlipTargetPolicy(t) for t in targets]
+    gates = args.release or ["working"]
+    policies: list = [
+        SlipTargetPolicy(t, SlipTargetLoop(release=g)) for g in gates for t in targets
+    ]
     if args.rail_teacher:
         policies.append(SlipTargetOracle())
     result = run_benchmark(policies, vehicle=args.vehicle, tier=args.tier, runs=args.runs,

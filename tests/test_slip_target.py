@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import shutil
 import warnings
 
 import numpy as np
@@ -26,7 +27,13 @@ from wsp_env.cli import main
 from wsp_env.core import kernel as K
 from wsp_env.envs import WSPBrakingEnv, WSPBrakingVectorEnv, make_core
 from wsp_env.evaluation import load_suite, run_suite
-from wsp_env.policy import POLICY_ENV_KWARGS, SB3Policy, make_policy
+from wsp_env.policy import (
+    POLICY_ENV_KWARGS,
+    SB3Policy,
+    make_policy,
+    model_metadata,
+    write_model_metadata,
+)
 from wsp_env.training.config import load_train_config
 
 SOAP = {"rail": "soap", "mu_contaminated": 0.07, "speed_kmh": 120.0, "pattern": "uniform"}
@@ -283,12 +290,79 @@ def test_gymnasium_and_sb3_checkers_pass_with_memory_features(kwargs):
         ({"slip_target_gain_per_kmh": 0.0}, "slip_target_gain_per_kmh"),
         ({"slip_target_lead_s": 1.5}, "slip_target_lead_s"),
         ({"slip_target_lead_s": True}, "slip_target_lead_s"),
+        ({"slip_target_release": "never"}, "slip_target_release"),
+        ({"slip_target_release": 1}, "slip_target_release"),
     ],
 )
 def test_bad_slip_target_argument_is_one_line(kwargs, name):
     with pytest.raises(ValueError, match=rf"^{name}: ") as err:
         WSPBrakingEnv(action_mode="slip_target", **kwargs)
     assert len(str(err.value).splitlines()) == 1
+
+
+def _release_periods(release: str, target_kmh: float, options: dict) -> tuple[int, float]:
+    """Control periods in which the loop's periodic release vented an axle, and the stopping
+    distance (m), of seed 0's stop at a constant ``target_kmh`` (UIC-Z1, ideal sensors)."""
+    env = WSPBrakingEnv(action_mode="slip_target", slip_target_release=release)
+    env.reset(seed=0, options=options)
+    action = _action_for(target_kmh, env.action_space.shape)
+    released = 0
+    while True:
+        *_, term, trunc, info = env.step(action)
+        released += int(env.core.loop.vent.any())
+        if term or trunc:
+            return released, info["metrics"]["stopping_distance_m"]
+
+
+def test_the_periodic_release_begins_only_while_the_loop_works():
+    """Dry, 80 km/h, level: no wheel slides (the largest measured slip 0.1 km/h). With a
+    3 km/h target the loop asks for under the demand while the cylinders fill at the onset,
+    so the estimator counts the reference's age from then, and no wheel is ever released to
+    re-anchor it. Ungated (``"always"``, the loop before 2026-11-27) the release then vented one
+    axle after another every 3 s of a train whose wheels all gripped: 185 periods, 221.0 m
+    (measured). Gated (the default), as the classical WSP: none, and the stop is the 4.25 km/h
+    target's (which never asks for under the demand after the onset: 207.8 m) within 0.1 %.
+    On soap 0.07, where the wheels slide, the releases stand and the stop is the same."""
+    dry = {"rail": "dry", "speed_kmh": 80.0, "gradient_permille": 0.0}
+    released, gated = _release_periods("working", 3.0, dry)
+    assert released == 0
+    ungated_released, ungated = _release_periods("always", 3.0, dry)
+    assert ungated_released > 50 and ungated > 1.05 * gated
+    assert gated == pytest.approx(_release_periods("working", MIDDLE_KMH, dry)[1], rel=1e-3)
+    soap_gated = _release_periods("working", MIDDLE_KMH, SOAP)
+    assert soap_gated[0] > 50
+    assert soap_gated == _release_periods("always", MIDDLE_KMH, SOAP)
+
+
+def test_the_release_gate_reads_the_loops_request_and_the_working_band():
+    """The gate alone, on a hand-made observation whose reference has gone 5 s without an
+    anchor (past the 3 s interval): no release while every request was the full demand and no
+    wheel slips beyond the estimator's working band (max(1.04 km/h, 6.06 % of the reference);
+    here 6.06 km/h at 100 km/h); a release of the last axle once one wheel slips 7 km/h, or once
+    the last request was under the demand; and ungated, at once."""
+    core = make_core(1, action_mode="slip_target")
+    obs = np.zeros((1, core.kernel_obs_dim))
+    na, loop = core.n_axles, core.loop
+    v_ref_kmh = 100.0
+    obs[:, :na] = (v_ref_kmh - 5.0) / 3.6 / loop.v_scale  # every wheel 5 km/h under it
+    obs[:, 4 * na + 1] = v_ref_kmh / 3.6 / loop.v_scale
+    obs[:, loop.age_index] = 5.0 / loop.age_scale
+
+    def releases(release: str, working: bool, wheel_kmh: float | None = None) -> bool:
+        loop.release = release
+        loop.reset(np.array([0]))
+        loop.working[0] = working
+        o = obs.copy()
+        if wheel_kmh is not None:
+            o[0, 0] = wheel_kmh / 3.6 / loop.v_scale
+        loop.advance(o)
+        return bool(loop.vent[0].any())
+
+    assert not releases("working", working=False)
+    assert releases("working", working=False, wheel_kmh=v_ref_kmh - 7.0)
+    assert releases("working", working=True)
+    assert releases("always", working=False)
+    assert loop.vent[0, na - 1]  # the last axle first
 
 
 def test_slip_target_vector_env_state_round_trip_is_bit_for_bit():
@@ -338,6 +412,15 @@ def test_training_config_and_trained_model_carry_the_mode(tmp_path):
     assert policy.action_repeat == own.pop("action_repeat") == 2  # the policy holds it itself
     assert {k: policy.env_kwargs[k] for k in own} == own
     assert "stagger_reset_steps" not in policy.env_kwargs
+    # the loop's release gate is written out; a file without it predates the gate and loads
+    # with the loop it was made with
+    assert policy.env_kwargs["slip_target_release"] == "working"
+    meta = model_metadata(out / "best_model.zip")
+    del meta["env_kwargs"]["slip_target_release"]
+    old = tmp_path / "old.zip"
+    shutil.copy(out / "best_model.zip", old)
+    write_model_metadata(old, meta)
+    assert model_metadata(old)["env_kwargs"]["slip_target_release"] == "always"
     # the residual mode's observation and actions have the slip-target mode's shapes: the
     # mode itself is checked
     with pytest.raises(ValueError, match=r"trained in action_mode 'slip_target'.*'residual'"):
@@ -363,6 +446,7 @@ def test_training_config_and_trained_model_carry_the_mode(tmp_path):
     loop = inputs["slip_target"]
     assert (loop["min_kmh"], loop["max_kmh"], loop["lead_s"]) == (0.5, 6.0, 0.05)
     assert loop["gain_per_kmh"] == 0.2 and loop["tier"] == "wheels"
+    assert loop["release"] == "working"
     assert loop["wsp"] == dataclasses.asdict(load_wsp_config(tier="wheels"))
 
 

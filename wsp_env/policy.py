@@ -281,8 +281,11 @@ POLICY_ENV_KWARGS = (
     "action_mode", "residual_scale", "residual_deadband", "valve_group", "privileged",
     "accelerometer", "accelerometer_bias_mps2", "control_period_s", "action_repeat",
     "slip_target_min_kmh", "slip_target_max_kmh", "slip_target_gain_per_kmh",
-    "slip_target_lead_s", "memory_features",
+    "slip_target_lead_s", "slip_target_release", "memory_features",
 )  # fmt: skip
+# the slip-target loop's periodic-release gate of a model file that does not name it: written
+# before the gate existed (2026-11-27), trained and judged with the ungated loop
+LEGACY_SLIP_TARGET_RELEASE = "always"
 
 
 META_NAME = "wsp_env.json"  # the metadata entry ``wsp-env train`` adds to every model file
@@ -352,8 +355,11 @@ def policy_metadata(config: dict[str, Any], name: str) -> dict[str, Any]:
             vehicle = load_vehicle(vehicle).id
         except (ConfigError, OSError):
             pass
-    # the sensor tier is written out even where the config leaves it to the defaults
-    sensors = {"privileged": False, "accelerometer": False}
+    # the sensor tier is written out even where the config leaves it to the defaults, and so
+    # is the slip-target loop's release gate (a file without it loads with the old loop)
+    written: dict[str, Any] = {"privileged": False, "accelerometer": False}
+    if env_kwargs.get("action_mode") == "slip_target":
+        written["slip_target_release"] = "working"
     return {
         "format": "wsp-env-policy/1",
         "name": name,
@@ -364,7 +370,7 @@ def policy_metadata(config: dict[str, Any], name: str) -> dict[str, Any]:
         # True: the model needs its STEM.vecnormalize.pkl (SB3Policy refuses it without)
         "obs_normalization": obs_normalization(config),
         "env_kwargs": {
-            **sensors,
+            **written,
             **{k: env_kwargs[k] for k in POLICY_ENV_KWARGS if k in env_kwargs},
         },
     }
@@ -403,6 +409,7 @@ def model_metadata(model_path: Path) -> dict[str, Any]:
                     meta.setdefault("name", model_path.stem)
                     meta.setdefault("frame_stack", 1)
                     meta.setdefault("env_kwargs", {})
+                    _legacy_release(meta["env_kwargs"])
                     if "obs_normalization" not in meta:  # written before the field existed
                         config = _run_config(model_path)
                         known = config is not None and "algo" in config
@@ -420,7 +427,18 @@ def model_metadata(model_path: Path) -> dict[str, Any]:
     # a model without its own entry predates the entry's observation layout (layout 0)
     meta = policy_metadata(config, f"{model_path.parent.name}/{model_path.stem}")
     meta["observation_layout"] = 0
+    if "slip_target_release" not in (config.get("env_kwargs") or {}):
+        meta["env_kwargs"].pop("slip_target_release", None)
+        _legacy_release(meta["env_kwargs"])
     return meta
+
+
+def _legacy_release(env_kwargs: dict[str, Any]) -> None:
+    """A slip-target model file that does not name its loop's release gate was written before
+    the gate existed: it gets the loop it was trained and judged with
+    (``LEGACY_SLIP_TARGET_RELEASE``)."""
+    if env_kwargs.get("action_mode") == "slip_target":
+        env_kwargs.setdefault("slip_target_release", LEGACY_SLIP_TARGET_RELEASE)
 
 
 def _run_config(model_path: Path) -> dict[str, Any] | None:

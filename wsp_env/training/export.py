@@ -181,6 +181,7 @@ def input_spec(policy: SB3Policy) -> dict[str, Any]:
             "max_kmh": core.slip_target_max_kmh,
             "gain_per_kmh": loop.gain_per_kmh,
             "lead_s": loop.lead_s,
+            "release": loop.release,
             "tier": tier,
             "wsp": dataclasses.asdict(loop.cfg),
         }
