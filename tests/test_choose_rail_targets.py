@@ -62,6 +62,13 @@ def test_the_best_return_within_the_limits_and_limits_dropped_last_first(tmp_pat
     assert "FAILS  mean stop / classical (mean of ratios): 0.93 against 0.9" in out
     assert "holds  longest lock [s]: 0 against 0.3" in out
     assert "6 of 10 criteria hold" in out
+    # each stop's best target after the fact: by return 8 km/h on the wet stops (90 m, the
+    # 1 s lock with it) and 2 on the leaves stops (50 m); by distance 2 everywhere (90 m ties
+    # with 8 on wet: the first, the lower target)
+    assert ("by return: mean stop / classical (mean of ratios) 0.700, worst 0.900, longest "
+            "lock 1.00 s; stops won (km/h: stops) 2: 2, 3: 0, 4: 0, 8: 2") in out  # fmt: skip
+    assert ("by distance: mean stop / classical (mean of ratios) 0.700, worst 0.900, longest "
+            "lock 0.00 s; stops won (km/h: stops) 2: 4, 3: 0, 4: 0, 8: 0") in out  # fmt: skip
     # a worst-stop limit no target meets: that limit alone is dropped (leaves: 3 km/h; the
     # watchdog and lock limits still hold, so not 2 or 8)
     assert choose_rail_targets.main([a, b, "--worst", "0.85"]) == 0
