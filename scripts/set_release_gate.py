@@ -1,0 +1,60 @@
+"""A copy of a slip-target model file with its loop's periodic-release gate set
+(``slip_target_release``: ``working`` or ``always``; docs/environment.md), so that a policy
+trained before the gate existed (which loads with ``always``, the loop it was made with) can be
+scored with the gated loop, or the other way round. The copy takes its observation statistics
+(``STEM.vecnormalize.pkl``) along; nothing else of the model changes.
+
+    .venv/bin/python scripts/set_release_gate.py runs/train/bc_st_v3_s1/student.zip \\
+        runs/s15/uic_v3_gated/student.zip working
+"""
+
+from __future__ import annotations
+
+import argparse
+import shutil
+import sys
+from pathlib import Path
+
+from wsp_env.baselines.slip_target import RELEASE_GATES
+from wsp_env.policy import model_metadata, write_model_metadata
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("model", type=Path, help="a slip-target model file (.zip)")
+    ap.add_argument("out", type=Path, help="the copy to write (.zip)")
+    ap.add_argument("gate", choices=RELEASE_GATES)
+    args = ap.parse_args(argv)
+    try:
+        if args.out.suffix != ".zip":
+            raise ValueError(f"{args.out}: the copy must be a .zip model file")
+        if args.out.resolve() == args.model.resolve():
+            raise ValueError(f"{args.out}: the model itself; write the copy elsewhere")
+        meta = model_metadata(args.model)
+        mode = meta["env_kwargs"].get("action_mode", "continuous")
+        if mode != "slip_target":
+            raise ValueError(f"{args.model}: not a slip-target model (action_mode {mode!r})")
+        norm = args.model.with_suffix(".vecnormalize.pkl")
+        if meta.get("obs_normalization") and not norm.exists():
+            raise ValueError(f"{args.model}: trained on normalised observations, {norm} missing")
+        meta["env_kwargs"]["slip_target_release"] = args.gate
+        meta["name"] = f"{args.out.parent.name}/{args.out.stem}"
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        # both files written beside their names first, then moved in: nothing half-written
+        parts = [(args.model, args.out)]
+        if norm.exists():
+            parts.append((norm, args.out.with_suffix(".vecnormalize.pkl")))
+        for src, dst in parts:
+            shutil.copy(src, dst.with_name(dst.name + ".part"))
+        write_model_metadata(args.out.with_name(args.out.name + ".part"), meta)
+        for _, dst in parts:
+            dst.with_name(dst.name + ".part").replace(dst)
+    except (OSError, ValueError) as err:
+        print(f"set_release_gate: {err}", file=sys.stderr)
+        return 2
+    print(f"{args.out}: slip_target_release {args.gate}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
