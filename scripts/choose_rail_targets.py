@@ -16,9 +16,9 @@ of its stops is its rail's constant target: ``oracle_target_rail`` runs bit for 
 ``tests/test_imitation.py``): its benchmark score with the 95 % interval and item 6's criteria
 (``ship_criteria.py``) on these stops; then **each stop's best target after the fact** (by
 return, and by the shortest stop): what no teacher that holds one of these targets a stop can
-beat, however it picks it (by return: none returns more on any stop; by distance: none has a
-lower mean of the per-stop ratios to the classical WSP's stop), with its worst stop and longest
-lock; then the table as YAML for a config. Never reads the
+beat, however it picks it (by return: none returns more on any stop, so none scores higher; by
+distance: none has a lower mean of the per-stop ratios to the classical WSP's stop), with its
+score, worst stop and longest lock; then the table as YAML for a config. Never reads the
 sealed set (refuses a file of it); the files must be of one vehicle and tier, each target in one.
 
     .venv/bin/python scripts/choose_rail_targets.py runs/s14/regiolis_targets_dev.json \\
@@ -104,12 +104,15 @@ def teacher(first: dict[str, Any], targets: dict, table: dict[str, float]) -> di
     return {**result, "criteria": criteria(data, "teacher")}
 
 
-def hindsight(classical: dict, targets: dict, by: str) -> dict[str, Any]:
+def hindsight(first: dict[str, Any], targets: dict, by: str) -> dict[str, Any]:
     """Each stop's best constant target after the fact (``by``: ``"return"``, the highest, or
-    ``"distance"``, the shortest stop): the mean and worst of its per-stop ratios to the
-    classical WSP's stop, its longest lock, and how many stops each target won."""
+    ``"distance"``, the shortest stop): its benchmark score with the 95 % interval, the mean
+    and worst of its per-stop ratios to the classical WSP's stop, its longest lock, and how
+    many stops each target won."""
     kmh = sorted(targets)
-    ratios, locks, wins = [], [], dict.fromkeys(kmh, 0)
+    classical = _keyed(first["run_results"]["classical"])
+    none = _keyed(first["run_results"]["none"])
+    ratios, locks, returns, wins = [], [], [], dict.fromkeys(kmh, 0)
     for k, base in classical.items():
         rows = [targets[t][k] for t in kmh]
         if by == "return":
@@ -117,9 +120,14 @@ def hindsight(classical: dict, targets: dict, by: str) -> dict[str, Any]:
         else:
             i = int(np.argmin([r["stopping_distance_m"] for r in rows]))
         wins[kmh[i]] += 1
+        returns.append(rows[i]["return"])
         ratios.append(rows[i]["stopping_distance_m"] / base["stopping_distance_m"])
         locks.append(rows[i]["max_lock_s"])
-    return {"mean_ratio": float(np.mean(ratios)), "worst_ratio": float(np.max(ratios)),
+    keys = list(classical)
+    result = score(np.array(returns), np.array([none[k]["return"] for k in keys]),
+                   np.array([classical[k]["return"] for k in keys]))  # fmt: skip
+    return {"score": result["score"], "score_ci95": result["score_ci95"],
+            "mean_ratio": float(np.mean(ratios)), "worst_ratio": float(np.max(ratios)),
             "longest_lock_s": float(max(locks)), "wins": wins}  # fmt: skip
 
 
@@ -191,12 +199,13 @@ def main(argv: list[str] | None = None) -> int:
         print(f"  {mark:5s}  {r['criterion']}: {value} against {r['limit']:.4g}")
     held = sum(r["holds"] for r in taught["criteria"])
     print(f"  {held} of {len(taught['criteria'])} criteria hold")
-    base = _keyed(first["run_results"]["classical"])
     print("each stop's best target after the fact (no one-target-a-stop teacher beats it):")
     for by in ("return", "distance"):
-        h = hindsight(base, targets, by)
+        h = hindsight(first, targets, by)
         wins = ", ".join(f"{t:g}: {n}" for t, n in h["wins"].items())
-        print(f"  by {by}: mean stop / classical (mean of ratios) {h['mean_ratio']:.3f}, worst "
+        lo, hi = h["score_ci95"] or (float("nan"), float("nan"))
+        print(f"  by {by}: score {h['score']:.4f} ({lo:.4f}-{hi:.4f}), "
+              f"mean stop / classical (mean of ratios) {h['mean_ratio']:.3f}, worst "
               f"{h['worst_ratio']:.3f}, longest lock {h['longest_lock_s']:.2f} s; stops won "
               f"(km/h: stops) {wins}")  # fmt: skip
     print("teacher_targets_kmh:")

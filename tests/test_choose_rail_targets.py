@@ -65,10 +65,14 @@ def test_the_best_return_within_the_limits_and_limits_dropped_last_first(tmp_pat
     # each stop's best target after the fact: by return 8 km/h on the wet stops (90 m, the
     # 1 s lock with it) and 2 on the leaves stops (50 m); by distance 2 everywhere (90 m ties
     # with 8 on wet: the first, the lower target)
-    assert ("by return: mean stop / classical (mean of ratios) 0.700, worst 0.900, longest "
-            "lock 1.00 s; stops won (km/h: stops) 2: 2, 3: 0, 4: 0, 8: 2") in out  # fmt: skip
-    assert ("by distance: mean stop / classical (mean of ratios) 0.700, worst 0.900, longest "
-            "lock 0.00 s; stops won (km/h: stops) 2: 4, 3: 0, 4: 0, 8: 0") in out  # fmt: skip
+    # (returns -4, -4, -1, -1 by return: normalised 1.1, 1.1, 1.4, 1.4, IQM 1.25; by distance
+    # -4.5, -4.5, -1, -1: 1.05, 1.05, 1.4, 1.4, IQM 1.225)
+    assert ("by return: score 1.2500 (1.1000-1.4000), mean stop / classical (mean of ratios) "
+            "0.700, worst 0.900, longest lock 1.00 s; stops won (km/h: stops) 2: 2, 3: 0, 4: 0, "
+            "8: 2") in out  # fmt: skip
+    assert ("by distance: score 1.2250 (1.0500-1.4000), mean stop / classical (mean of ratios) "
+            "0.700, worst 0.900, longest lock 0.00 s; stops won (km/h: stops) 2: 4, 3: 0, 4: 0, "
+            "8: 0") in out  # fmt: skip
     # a worst-stop limit no target meets: that limit alone is dropped (leaves: 3 km/h; the
     # watchdog and lock limits still hold, so not 2 or 8)
     assert choose_rail_targets.main([a, b, "--worst", "0.85"]) == 0
