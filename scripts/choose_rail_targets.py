@@ -20,6 +20,8 @@ beat, however it picks it (by return: none returns more on any stop, so none sco
 distance: none has a lower mean of the per-stop ratios to the classical WSP's stop), with its
 score, worst stop and longest lock; then the table as YAML for a config. Never reads the
 sealed set (refuses a file of it); the files must be of one vehicle and tier, each target in one.
+Reads only the targets named ``slip_target_<x>kmh``: the gated loop's since 2026-11-27 (a file
+made before then named its ungated runs so; ``slip_target_<x>kmh_always`` is skipped).
 
     .venv/bin/python scripts/choose_rail_targets.py runs/s14/regiolis_targets_dev.json \\
         [runs/s14/more_targets_dev.json] [--worst 1.10]

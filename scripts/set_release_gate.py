@@ -19,6 +19,27 @@ from wsp_env.baselines.slip_target import RELEASE_GATES
 from wsp_env.policy import model_metadata, write_model_metadata
 
 
+def _write(pairs: list[tuple[Path, Path]], meta: dict) -> None:
+    """Each (source, copy) written beside its name first (the model's metadata set), then moved
+    in, the model file last: a failure leaves no part behind and no model without its
+    statistics."""
+    parts = [dst.with_name(dst.name + ".part") for _, dst in pairs]
+    folder = pairs[0][1].parent
+    made = not folder.exists()
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        for (src, _), part in zip(pairs, parts, strict=True):
+            shutil.copy(src, part)
+        write_model_metadata(parts[-1], meta)
+        for (_, dst), part in zip(pairs, parts, strict=True):
+            part.replace(dst)
+    finally:
+        for part in parts:
+            part.unlink(missing_ok=True)
+        if made and not any(folder.iterdir()):
+            folder.rmdir()
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("model", type=Path, help="a slip-target model file (.zip)")
@@ -39,16 +60,14 @@ def main(argv: list[str] | None = None) -> int:
             raise ValueError(f"{args.model}: trained on normalised observations, {norm} missing")
         meta["env_kwargs"]["slip_target_release"] = args.gate
         meta["name"] = f"{args.out.parent.name}/{args.out.stem}"
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        # both files written beside their names first, then moved in: nothing half-written
-        parts = [(args.model, args.out)]
+        # the model file and, where the model has one, its observation statistics
+        pairs = [(args.model, args.out)]
         if norm.exists():
-            parts.append((norm, args.out.with_suffix(".vecnormalize.pkl")))
-        for src, dst in parts:
-            shutil.copy(src, dst.with_name(dst.name + ".part"))
-        write_model_metadata(args.out.with_name(args.out.name + ".part"), meta)
-        for _, dst in parts:
-            dst.with_name(dst.name + ".part").replace(dst)
+            pairs.insert(0, (norm, args.out.with_suffix(".vecnormalize.pkl")))
+        for path in (args.out, args.out.with_suffix(".vecnormalize.pkl")):
+            if path.exists():
+                raise ValueError(f"{path}: exists; not overwriting")
+        _write(pairs, meta)
     except (OSError, ValueError) as err:
         print(f"set_release_gate: {err}", file=sys.stderr)
         return 2

@@ -58,8 +58,12 @@ def main(argv: list[str] | None = None) -> int:
     policies: list = [
         SlipTargetPolicy(t, SlipTargetLoop(release=g)) for g in gates for t in targets
     ]
-    if args.rail_teacher:
-        policies.append(SlipTargetOracle())
+    if args.rail_teacher:  # under each gate too (named where it is not the default)
+        for g in gates:
+            teacher = SlipTargetOracle()
+            teacher.loop = SlipTargetLoop(release=g)
+            teacher.name += "" if g == "working" else f"_{g}"
+            policies.append(teacher)
     result = run_benchmark(policies, vehicle=args.vehicle, tier=args.tier, runs=args.runs,
                            stop_set=args.stops, keep_runs=args.json_path is not None,
                            progress=lambda m: print(m, file=sys.stderr))  # fmt: skip

@@ -51,6 +51,25 @@ def test_the_copy_names_the_gate_and_keeps_the_rest(tmp_path, capsys):
     assert "slip_target_release working" in capsys.readouterr().out
 
 
+def test_an_existing_copy_or_a_failed_write_leaves_nothing_new(tmp_path, capsys, monkeypatch):
+    old = _slip_target_model(tmp_path)
+    new = tmp_path / "new" / "student.zip"
+    assert set_release_gate.main([str(old), str(new), "working"]) == 0
+    before = new.read_bytes()
+    assert set_release_gate.main([str(old), str(new), "always"]) == 2
+    assert "exists; not overwriting" in capsys.readouterr().err
+    assert new.read_bytes() == before
+
+    def fail(path, meta):
+        raise OSError(f"{path}: disk full")
+
+    monkeypatch.setattr(set_release_gate, "write_model_metadata", fail)
+    other = tmp_path / "other" / "student.zip"
+    assert set_release_gate.main([str(old), str(other), "working"]) == 2
+    assert "disk full" in capsys.readouterr().err
+    assert not other.parent.exists()
+
+
 @pytest.mark.parametrize("case", ["continuous", "same", "suffix", "missing"])
 def test_bad_input_is_one_line_and_writes_nothing(tmp_path, capsys, case):
     model = _slip_target_model(tmp_path)

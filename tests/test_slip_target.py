@@ -35,6 +35,7 @@ from wsp_env.policy import (
     write_model_metadata,
 )
 from wsp_env.training.config import load_train_config
+from wsp_env.training.train import pin_release_gate
 
 SOAP = {"rail": "soap", "mu_contaminated": 0.07, "speed_kmh": 120.0, "pattern": "uniform"}
 MIDDLE_KMH = 4.25  # a = 0: the middle of the default 0.5-8 km/h
@@ -429,6 +430,15 @@ def test_training_config_and_trained_model_carry_the_mode(tmp_path):
     assert len(results) == 2
     saved = yaml.safe_load((out / "config.yaml").read_text())
     assert saved["env_kwargs"]["stagger_reset_steps"] == 20
+    # the run folder names the loop's gate; a run folder that does not was started before the
+    # gate and resumes with the loop it began with
+    assert saved["env_kwargs"]["slip_target_release"] == "working"
+    assert pin_release_gate(cfg, started_before_gate=True).env_kwargs["slip_target_release"] == (
+        "always"
+    )
+    pinned = pin_release_gate(cfg, started_before_gate=False)
+    assert pinned.env_kwargs["slip_target_release"] == "working"
+    assert pin_release_gate(pinned, started_before_gate=True) is pinned
     # the ONNX export
     ort = pytest.importorskip("onnxruntime")
     onnx_path = tmp_path / "p.onnx"
@@ -447,6 +457,7 @@ def test_training_config_and_trained_model_carry_the_mode(tmp_path):
     assert (loop["min_kmh"], loop["max_kmh"], loop["lead_s"]) == (0.5, 6.0, 0.05)
     assert loop["gain_per_kmh"] == 0.2 and loop["tier"] == "wheels"
     assert loop["release"] == "working"
+    assert (loop["working_band_kmh"], loop["working_band_rel"]) == pytest.approx((1.04, 0.0606))
     assert loop["wsp"] == dataclasses.asdict(load_wsp_config(tier="wheels"))
 
 

@@ -182,6 +182,10 @@ def input_spec(policy: SB3Policy) -> dict[str, Any]:
             "gain_per_kmh": loop.gain_per_kmh,
             "lead_s": loop.lead_s,
             "release": loop.release,
+            # "working": a release begins only while the loop asked for under the demand in the
+            # last period or a wheel's measured slip exceeds max(kmh, rel x the reference)
+            "working_band_kmh": loop.active_slip * 3.6,
+            "working_band_rel": loop.active_slip_rel,
             "tier": tier,
             "wsp": dataclasses.asdict(loop.cfg),
         }

@@ -585,6 +585,7 @@ def _train(
         if ckpt is None:
             raise ConfigError(f"{resume}: no checkpoint to resume from (checkpoints/step_N)")
         cfg = parse_train_config(read_yaml(resume / CONFIG_NAME), str(resume / CONFIG_NAME))
+        cfg = pin_release_gate(cfg, started_before_gate=True)
         if out.resolve() != resume.resolve() and out.exists() and any(out.iterdir()):
             raise ConfigError(f"{out}: exists and is not empty; not overwriting")
     else:
@@ -593,6 +594,7 @@ def _train(
         cfg = config if isinstance(config, TrainConfig) else load_train_config(config)
         if seed is not None:
             cfg = dataclasses.replace(cfg, seed=seed)
+        cfg = pin_release_gate(cfg, started_before_gate=False)
         if out.exists() and any(out.iterdir()):
             raise ConfigError(f"{out}: exists and is not empty (use --resume {out} to continue)")
     cls = algo_class(cfg.algo)
@@ -813,3 +815,17 @@ __all__ = [
     "thread_switch",
     "train",
 ]
+
+
+def pin_release_gate(cfg: TrainConfig, started_before_gate: bool) -> TrainConfig:
+    """A slip-target run's config with its loop's periodic-release gate named, as it is written
+    to the run folder (``config.yaml``): a new run gets the default (``"working"``); a run folder
+    whose config does not name it was started before the gate existed and resumes with the loop
+    it began with (``policy.LEGACY_SLIP_TARGET_RELEASE``)."""
+    from wsp_env.policy import LEGACY_SLIP_TARGET_RELEASE
+
+    kw = cfg.env_kwargs
+    if kw.get("action_mode") != "slip_target" or "slip_target_release" in kw:
+        return cfg
+    gate = LEGACY_SLIP_TARGET_RELEASE if started_before_gate else "working"
+    return dataclasses.replace(cfg, env_kwargs={**kw, "slip_target_release": gate})
