@@ -301,10 +301,14 @@ def test_bad_slip_target_argument_is_one_line(kwargs, name):
     assert len(str(err.value).splitlines()) == 1
 
 
-def _release_periods(release: str, target_kmh: float, options: dict) -> tuple[int, float]:
+def _release_periods(
+    release: str, target_kmh: float, options: dict, valve_group: str | None = None
+) -> tuple[int, float]:
     """Control periods in which the loop's periodic release vented an axle, and the stopping
     distance (m), of seed 0's stop at a constant ``target_kmh`` (UIC-Z1, ideal sensors)."""
-    env = WSPBrakingEnv(action_mode="slip_target", slip_target_release=release)
+    env = WSPBrakingEnv(
+        action_mode="slip_target", slip_target_release=release, valve_group=valve_group
+    )
     env.reset(seed=0, options=options)
     action = _action_for(target_kmh, env.action_space.shape)
     released = 0
@@ -323,13 +327,18 @@ def test_the_periodic_release_begins_only_while_the_loop_works():
     axle after another every 3 s of a train whose wheels all gripped: 185 periods, 221.0 m
     (measured). Gated (the default), as the classical WSP: none, and the stop is the 4.25 km/h
     target's (which never asks for under the demand after the onset: 207.8 m) within 0.1 %.
-    On soap 0.07, where the wheels slide, the releases stand and the stop is the same."""
+    On soap 0.07, where the wheels slide, the releases stand and the stop is the same. With
+    bogie valves (a release vents both axles of a bogie) the same: ungated 185 periods and
+    236.6 m, gated none and the axle valves' stop."""
     dry = {"rail": "dry", "speed_kmh": 80.0, "gradient_permille": 0.0}
     released, gated = _release_periods("working", 3.0, dry)
     assert released == 0
     ungated_released, ungated = _release_periods("always", 3.0, dry)
     assert ungated_released > 50 and ungated > 1.05 * gated
     assert gated == pytest.approx(_release_periods("working", MIDDLE_KMH, dry)[1], rel=1e-3)
+    bogie = _release_periods("working", 3.0, dry, valve_group="bogie")
+    assert bogie == (0, pytest.approx(gated, rel=1e-3))
+    assert _release_periods("always", 3.0, dry, valve_group="bogie")[1] > 1.1 * gated
     soap_gated = _release_periods("working", MIDDLE_KMH, SOAP)
     assert soap_gated[0] > 50
     assert soap_gated == _release_periods("always", MIDDLE_KMH, SOAP)
