@@ -208,7 +208,7 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         frac = np.where(-decel > cfg.accel_hold_mps2, np.maximum(frac, hold), frac)
         frac = np.clip(frac, 0.0, 1.0)
         slow = v_ref[:, 0] < cfg.min_speed_kmh / 3.6
-        self.working = (frac < 1.0 - 1e-6).any(axis=1) & ~slow
+        self.working[...] = (frac < 1.0 - 1e-6).any(axis=1) & ~slow  # in place
         frac[self.vent] = 0.0
         frac[slow] = 1.0
         valve = np.minimum.reduceat(frac, self.valve_starts, axis=1)
