@@ -8,7 +8,8 @@ the same stops, sensors, watchdog and score.
 
     .venv/bin/python scripts/slip_target_benchmark.py --tier wheels+accel --target 4.25 \\
         [--target 2 --target 6] [--runs 300] [--stops development] [--vehicle regiolis] \\
-        [--json runs/bench/slip_constant.json] [--rail-teacher] [--release always]
+        [--json runs/bench/slip_constant.json] [--rail-teacher] [--release always] \\
+        [--max-creep 0 --max-creep 0.2]
 
 ``--rail-teacher`` adds ``baselines.oracle.SlipTargetOracle``: the privileged teacher of the
 imitation start (``oracle_target_rail``: each stop's constant target picked by its rail, which
@@ -24,7 +25,13 @@ from pathlib import Path
 
 from wsp_env import BENCHMARK_VEHICLES
 from wsp_env.baselines.oracle import SlipTargetOracle
-from wsp_env.baselines.slip_target import RELEASE_GATES, SlipTargetLoop, SlipTargetPolicy
+from wsp_env.baselines.slip_target import (
+    DEFAULT_MAX_CREEP,
+    DEFAULT_RELEASE,
+    RELEASE_GATES,
+    SlipTargetLoop,
+    SlipTargetPolicy,
+)
 from wsp_env.cli.printing import print_benchmark
 from wsp_env.evaluation.benchmark import SEALED_RUNS, STOP_SETS, run_benchmark
 
@@ -49,20 +56,34 @@ def main(argv: list[str] | None = None) -> int:
         help="the loop's periodic-release gate (repeatable: each target under each; default "
         "working)",
     )
+    ap.add_argument(
+        "--max-creep",
+        type=float,
+        action="append",
+        help="the loop's cap on each target, a fraction of the reference speed (0: none; "
+        f"repeatable; default {DEFAULT_MAX_CREEP})",
+    )
     args = ap.parse_args(argv)
     targets = args.target or [4.25]
     if any(not 0.0 <= t <= 30.0 for t in targets):
         print("--target: a sliding speed in [0, 30] km/h", file=sys.stderr)
         return 2
-    gates = args.release or ["working"]
+    caps = args.max_creep or [DEFAULT_MAX_CREEP]
+    if any(not 0.0 <= c <= 1.0 for c in caps):
+        print("--max-creep: a fraction of the reference speed in [0, 1]", file=sys.stderr)
+        return 2
+    loops = [(g, c) for g in args.release or [DEFAULT_RELEASE] for c in caps]
     policies: list = [
-        SlipTargetPolicy(t, SlipTargetLoop(release=g)) for g in gates for t in targets
+        SlipTargetPolicy(t, SlipTargetLoop(release=g, max_creep=c))
+        for g, c in loops
+        for t in targets
     ]
-    if args.rail_teacher:  # under each gate too (named where it is not the default)
-        for g in gates:
+    if args.rail_teacher:  # under each loop too (named where it is not the default)
+        for g, c in loops:
             teacher = SlipTargetOracle()
-            teacher.loop = SlipTargetLoop(release=g)
-            teacher.name += "" if g == "working" else f"_{g}"
+            teacher.loop = SlipTargetLoop(release=g, max_creep=c)
+            teacher.name += "" if g == DEFAULT_RELEASE else f"_{g}"
+            teacher.name += "" if c == DEFAULT_MAX_CREEP else f"_creep{c:g}"
             policies.append(teacher)
     result = run_benchmark(policies, vehicle=args.vehicle, tier=args.tier, runs=args.runs,
                            stop_set=args.stops, keep_runs=args.json_path is not None,

@@ -22,7 +22,7 @@ from gymnasium.utils.env_checker import check_env
 from test_train import train_config
 
 from wsp_env.baselines.classical import load_wsp_config
-from wsp_env.baselines.slip_target import SlipTargetLoop, SlipTargetPolicy
+from wsp_env.baselines.slip_target import MAX_CREEP_FLOOR_KMH, SlipTargetLoop, SlipTargetPolicy
 from wsp_env.cli import main
 from wsp_env.core import kernel as K
 from wsp_env.envs import WSPBrakingEnv, WSPBrakingVectorEnv, make_core
@@ -35,7 +35,7 @@ from wsp_env.policy import (
     write_model_metadata,
 )
 from wsp_env.training.config import load_train_config
-from wsp_env.training.train import pin_release_gate
+from wsp_env.training.train import pin_loop_settings
 
 SOAP = {"rail": "soap", "mu_contaminated": 0.07, "speed_kmh": 120.0, "pattern": "uniform"}
 MIDDLE_KMH = 4.25  # a = 0: the middle of the default 0.5-8 km/h
@@ -293,6 +293,8 @@ def test_gymnasium_and_sb3_checkers_pass_with_memory_features(kwargs):
         ({"slip_target_lead_s": True}, "slip_target_lead_s"),
         ({"slip_target_release": "never"}, "slip_target_release"),
         ({"slip_target_release": 1}, "slip_target_release"),
+        ({"slip_target_max_creep": -0.1}, "slip_target_max_creep"),
+        ({"slip_target_max_creep": 1.5}, "slip_target_max_creep"),
     ],
 )
 def test_bad_slip_target_argument_is_one_line(kwargs, name):
@@ -342,6 +344,70 @@ def test_the_periodic_release_begins_only_while_the_loop_works():
     soap_gated = _release_periods("working", MIDDLE_KMH, SOAP)
     assert soap_gated[0] > 50
     assert soap_gated == _release_periods("always", MIDDLE_KMH, SOAP)
+
+
+def test_the_creep_cap_asks_for_at_most_its_fraction_of_the_reference():
+    """The cap alone, on a hand-made observation (every wheel 1 km/h under the reference, the
+    cylinders at half the demand): at 100 km/h an 8 km/h target is under 20 % of the reference
+    and the capped loop asks for what the uncapped one does; at 15 km/h it asks for what the
+    uncapped loop asks for a 3 km/h target (20 % of 15 km/h); at 6 km/h for 2 km/h, the floor
+    (20 % would be 1.2), where a 1 km/h target stays 1 km/h; 0 is no cap."""
+    core = make_core(1, action_mode="slip_target")
+    na, capped = core.n_axles, core.loop
+    assert capped.max_creep == 0.2
+    free = make_core(1, action_mode="slip_target", slip_target_max_creep=0.0).loop
+    assert free.max_creep == 0.0
+
+    def obs(v_ref_kmh: float) -> np.ndarray:
+        o = np.zeros((1, core.kernel_obs_dim))
+        o[:, :na] = (v_ref_kmh - 1.0) / 3.6 / capped.v_scale
+        o[:, 3 * na : 4 * na] = 0.5  # / p_max
+        o[:, 4 * na] = 1.0  # the demand / p_max
+        o[:, 4 * na + 1] = v_ref_kmh / 3.6 / capped.v_scale
+        return o
+
+    target = np.full((1, core.n_valves), 8.0)
+    for loop in (capped, free):
+        loop.reset(np.array([0]))
+    fast = obs(100.0)
+    assert np.array_equal(capped.command(fast, target), free.command(fast, target))
+    slow = obs(15.0)
+    want = free.command(slow, np.full_like(target, 3.0))
+    assert np.allclose(capped.command(slow, target), want, rtol=0, atol=1e-12)
+    assert not np.allclose(free.command(slow, target), want)
+    slower = obs(6.0)
+    assert MAX_CREEP_FLOOR_KMH == 2.0
+    want = free.command(slower, np.full_like(target, 2.0))
+    assert np.allclose(capped.command(slower, target), want, rtol=0, atol=1e-12)
+    low = np.full_like(target, 1.0)
+    assert np.array_equal(capped.command(slower, low), free.command(slower, low))
+
+
+def _capped_stop(max_creep: float, target_kmh: float) -> tuple[float, float]:
+    """Stopping distance (m) and longest lock (s) of seed 0's leaves stop (UIC-Z1, mu 0.04,
+    60 km/h, level, with the accelerometer) at a constant ``target_kmh``."""
+    env = WSPBrakingEnv(
+        action_mode="slip_target", slip_target_max_creep=max_creep, accelerometer=True
+    )
+    env.reset(seed=0, options={"rail": "leaves", "mu_contaminated": 0.04, "speed_kmh": 60.0})
+    action = _action_for(target_kmh, env.action_space.shape)
+    while True:
+        *_, term, trunc, info = env.step(action)
+        if term or trunc:
+            return info["metrics"]["stopping_distance_m"], info["metrics"]["max_lock_s"]
+
+
+def test_the_creep_cap_ends_the_locks_of_a_high_target_as_the_train_slows():
+    """Leaves, 60 km/h: an 8 km/h target without the cap asks for 80 % creep at 10 km/h and
+    locks a wheel for 4.52 s near the stop (263.4 m, measured); capped at 20 % of the
+    reference, none locks and the stop is 4 % shorter (252.4 m). A 2 km/h target is never
+    capped (the cap's floor): the same stop, bit for bit. Bounds: the lock over 3 s uncapped,
+    under 0.1 s capped."""
+    free_m, free_lock = _capped_stop(0.0, 8.0)
+    capped_m, capped_lock = _capped_stop(0.2, 8.0)
+    assert free_lock > 3.0 and capped_lock < 0.1
+    assert capped_m < 0.98 * free_m
+    assert _capped_stop(0.2, 2.0) == _capped_stop(0.0, 2.0)
 
 
 def test_the_release_gate_reads_the_loops_request_and_the_working_band():
@@ -422,15 +488,26 @@ def test_training_config_and_trained_model_carry_the_mode(tmp_path):
     assert policy.action_repeat == own.pop("action_repeat") == 2  # the policy holds it itself
     assert {k: policy.env_kwargs[k] for k in own} == own
     assert "stagger_reset_steps" not in policy.env_kwargs
-    # the loop's release gate is written out; a file without it predates the gate and loads
-    # with the loop it was made with
+    # the loop's release gate and creep cap are written out; a file without one predates it
+    # and loads with the loop it was made with (a file of the gate without the cap: gated,
+    # uncapped)
     assert policy.env_kwargs["slip_target_release"] == "working"
+    assert policy.env_kwargs["slip_target_max_creep"] == 0.2
     meta = model_metadata(out / "best_model.zip")
-    del meta["env_kwargs"]["slip_target_release"]
+    del meta["env_kwargs"]["slip_target_max_creep"]
     old = tmp_path / "old.zip"
     shutil.copy(out / "best_model.zip", old)
+    norm = (out / "best_model.zip").with_suffix(".vecnormalize.pkl")
+    if norm.exists():
+        shutil.copy(norm, old.with_suffix(".vecnormalize.pkl"))
     write_model_metadata(old, meta)
-    assert model_metadata(old)["env_kwargs"]["slip_target_release"] == "always"
+    kw = model_metadata(old)["env_kwargs"]
+    assert (kw["slip_target_release"], kw["slip_target_max_creep"]) == ("working", 0.0)
+    del meta["env_kwargs"]["slip_target_release"]
+    write_model_metadata(old, meta)
+    kw = model_metadata(old)["env_kwargs"]
+    assert (kw["slip_target_release"], kw["slip_target_max_creep"]) == ("always", 0.0)
+    assert SB3Policy(old).env_kwargs["slip_target_max_creep"] == 0.0
     # the residual mode's observation and actions have the slip-target mode's shapes: the
     # mode itself is checked
     with pytest.raises(ValueError, match=r"trained in action_mode 'slip_target'.*'residual'"):
@@ -439,15 +516,21 @@ def test_training_config_and_trained_model_carry_the_mode(tmp_path):
     assert len(results) == 2
     saved = yaml.safe_load((out / "config.yaml").read_text())
     assert saved["env_kwargs"]["stagger_reset_steps"] == 20
-    # the run folder names the loop's gate; a run folder that does not was started before the
-    # gate and resumes with the loop it began with
+    # the run folder names the loop's gate and cap; a run folder that does not name one was
+    # started before it and resumes with the loop it began with
     assert saved["env_kwargs"]["slip_target_release"] == "working"
-    assert pin_release_gate(cfg, started_before_gate=True).env_kwargs["slip_target_release"] == (
-        "always"
-    )
-    pinned = pin_release_gate(cfg, started_before_gate=False)
+    assert saved["env_kwargs"]["slip_target_max_creep"] == 0.2
+    old_run = pin_loop_settings(cfg, started_before=True).env_kwargs
+    assert (old_run["slip_target_release"], old_run["slip_target_max_creep"]) == ("always", 0.0)
+    pinned = pin_loop_settings(cfg, started_before=False)
     assert pinned.env_kwargs["slip_target_release"] == "working"
-    assert pin_release_gate(pinned, started_before_gate=True) is pinned
+    assert pinned.env_kwargs["slip_target_max_creep"] == 0.2
+    assert pin_loop_settings(pinned, started_before=True) is pinned
+    gated = {**cfg.env_kwargs, "slip_target_release": "working"}  # after the gate, before the cap
+    kw = pin_loop_settings(
+        dataclasses.replace(cfg, env_kwargs=gated), started_before=True
+    ).env_kwargs
+    assert (kw["slip_target_release"], kw["slip_target_max_creep"]) == ("working", 0.0)
     # the ONNX export
     ort = pytest.importorskip("onnxruntime")
     onnx_path = tmp_path / "p.onnx"
@@ -465,7 +548,8 @@ def test_training_config_and_trained_model_carry_the_mode(tmp_path):
     loop = inputs["slip_target"]
     assert (loop["min_kmh"], loop["max_kmh"], loop["lead_s"]) == (0.5, 6.0, 0.05)
     assert loop["gain_per_kmh"] == 0.2 and loop["tier"] == "wheels"
-    assert loop["release"] == "working"
+    assert loop["release"] == "working" and loop["max_creep"] == 0.2
+    assert loop["max_creep_floor_kmh"] == 2.0
     assert (loop["working_band_kmh"], loop["working_band_rel"]) == pytest.approx((1.04, 0.0606))
     assert loop["wsp"] == dataclasses.asdict(load_wsp_config(tier="wheels"))
 

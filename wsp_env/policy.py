@@ -281,11 +281,26 @@ POLICY_ENV_KWARGS = (
     "action_mode", "residual_scale", "residual_deadband", "valve_group", "privileged",
     "accelerometer", "accelerometer_bias_mps2", "control_period_s", "action_repeat",
     "slip_target_min_kmh", "slip_target_max_kmh", "slip_target_gain_per_kmh",
-    "slip_target_lead_s", "slip_target_release", "memory_features",
+    "slip_target_lead_s", "slip_target_release", "slip_target_max_creep", "memory_features",
 )  # fmt: skip
 # the slip-target loop's periodic-release gate of a model file that does not name it: written
 # before the gate existed (2026-11-27), trained and judged with the ungated loop
 LEGACY_SLIP_TARGET_RELEASE = "always"
+# the slip-target loop's settings added after its first models, each with the value a model
+# file or run folder that does not name it gets (written before the setting existed: the loop
+# it was trained and judged with); what files name now: ``loop_settings_now``
+LEGACY_LOOP_SETTINGS: dict[str, Any] = {
+    "slip_target_release": LEGACY_SLIP_TARGET_RELEASE,
+    "slip_target_max_creep": 0.0,
+}
+
+
+def loop_settings_now() -> dict[str, Any]:
+    """The slip-target loop's later settings (``LEGACY_LOOP_SETTINGS``' keys) as the environment
+    sets them by default now: what model files and run folders are written with."""
+    from wsp_env.baselines.slip_target import DEFAULT_MAX_CREEP, DEFAULT_RELEASE
+
+    return {"slip_target_release": DEFAULT_RELEASE, "slip_target_max_creep": DEFAULT_MAX_CREEP}
 
 
 META_NAME = "wsp_env.json"  # the metadata entry ``wsp-env train`` adds to every model file
@@ -356,10 +371,10 @@ def policy_metadata(config: dict[str, Any], name: str) -> dict[str, Any]:
         except (ConfigError, OSError):
             pass
     # the sensor tier is written out even where the config leaves it to the defaults, and so
-    # is the slip-target loop's release gate (a file without it loads with the old loop)
+    # are the slip-target loop's later settings (a file without one loads with the old loop)
     written: dict[str, Any] = {"privileged": False, "accelerometer": False}
     if env_kwargs.get("action_mode") == "slip_target":
-        written["slip_target_release"] = "working"
+        written.update(loop_settings_now())
     return {
         "format": "wsp-env-policy/1",
         "name": name,
@@ -409,7 +424,7 @@ def model_metadata(model_path: Path) -> dict[str, Any]:
                     meta.setdefault("name", model_path.stem)
                     meta.setdefault("frame_stack", 1)
                     meta.setdefault("env_kwargs", {})
-                    _legacy_release(meta["env_kwargs"])
+                    legacy_loop_settings(meta["env_kwargs"])
                     if "obs_normalization" not in meta:  # written before the field existed
                         config = _run_config(model_path)
                         known = config is not None and "algo" in config
@@ -427,18 +442,22 @@ def model_metadata(model_path: Path) -> dict[str, Any]:
     # a model without its own entry predates the entry's observation layout (layout 0)
     meta = policy_metadata(config, f"{model_path.parent.name}/{model_path.stem}")
     meta["observation_layout"] = 0
-    if "slip_target_release" not in (config.get("env_kwargs") or {}):
-        meta["env_kwargs"].pop("slip_target_release", None)
-        _legacy_release(meta["env_kwargs"])
+    named = config.get("env_kwargs") or {}
+    for key in LEGACY_LOOP_SETTINGS:
+        if key not in named:
+            meta["env_kwargs"].pop(key, None)
+    legacy_loop_settings(meta["env_kwargs"])
     return meta
 
 
-def _legacy_release(env_kwargs: dict[str, Any]) -> None:
-    """A slip-target model file that does not name its loop's release gate was written before
-    the gate existed: it gets the loop it was trained and judged with
-    (``LEGACY_SLIP_TARGET_RELEASE``)."""
+def legacy_loop_settings(env_kwargs: dict[str, Any]) -> dict[str, Any]:
+    """A slip-target model's or run's environment settings, each of the loop's later settings
+    (``LEGACY_LOOP_SETTINGS``) it does not name set, in place, to the value of the loop it was
+    trained and judged with (it was written before the setting existed); returned."""
     if env_kwargs.get("action_mode") == "slip_target":
-        env_kwargs.setdefault("slip_target_release", LEGACY_SLIP_TARGET_RELEASE)
+        for key, before in LEGACY_LOOP_SETTINGS.items():
+            env_kwargs.setdefault(key, before)
+    return env_kwargs
 
 
 def _run_config(model_path: Path) -> dict[str, Any] | None:

@@ -42,8 +42,10 @@ the lead 0.1 s: the pneumatics' lag), a proportional law on the pressure fractio
 hold, minimum speed and **periodic release** (one axle in turn vented until the reference
 re-anchors on it: without it the reference falls below the train while every axle slides at
 its target, and the wheels lock with their measured slip on target), on the thresholds of the
-sensor tier's frozen classical WSP; a bogie valve takes its most cautious axle's request. The
-measured slip settles on the target (median mid-stop 3.86-3.98 km/h for 4 km/h on soap).
+sensor tier's frozen classical WSP; each target at most ``slip_target_max_creep`` (20 %) of the
+reference speed, or 2 km/h where that is more (a target fixed in km/h near standstill asks for
+a nearly locked wheel); a bogie valve takes its most cautious axle's request. The
+measured slip settles on the target (median mid-stop 3.85-3.98 km/h for 4 km/h on soap).
 **The watchdog still acts** on the loop's valve commands (Safety watchdog): a target of 0
 (``slip_target_min_kmh=0``, ``a = -1``) asks for no measured slip, so from a stop's start the
 cylinders stay nearly empty; with ideal sensors every axle is released, and the
@@ -245,6 +247,7 @@ num_envs=N, **kwargs)``:
 | ``slip_target_gain_per_kmh`` | float | ``0.2`` | slip-target mode: the inner loop's demand fraction per km/h of slip error, (0, 10] |
 | ``slip_target_lead_s`` | float | ``0.1`` | slip-target mode: the inner loop's lead on the measured wheel deceleration, s, [0, 1] |
 | ``slip_target_release`` | str | ``"working"`` | slip-target mode: when the inner loop's periodic release may begin: ``working``, only while the loop works (some axle asked for under the full demand in the last period, or a wheel's measured slip is beyond the estimator's working band), as the classical WSP; ``always``, whenever the reference's age allows (the loop before 2026-11-27; a policy file that does not name it loads with it) |
+| ``slip_target_max_creep`` | float | ``0.2`` | slip-target mode: each target at most this fraction of the reference speed (a target fixed in km/h grows into a near-lock as the train slows), [0, 1]; 0: no cap (the loop before 2026-11-27's cap; a policy file that does not name it loads with 0) |
 | ``stagger_reset_steps`` | int | ``0`` | vector class only (the single class takes only 0), a training option: ``reset`` advances each environment a random, seeded number of steps below this into a stop, driven by the classical WSP, so that stops do not all end together (``WSPBrakingVectorEnv``'s docstring); 0: off |
 | ``memory_features`` | bool | False | append the memory features (Observation Space): per axle time in the current slide, time since the last release, sliding-energy estimate |
 | ``substep_s`` | float | ``0.001`` | the physics substep (linearly implicit; docs/physics.md) |
@@ -302,6 +305,12 @@ num_envs=N, **kwargs)``:
   another every 3 s of a train whose wheels all gripped (dry, 80 km/h, 3 km/h: 221.0 m against
   207.8 m). A policy file that does not name the gate was written before it and loads with
   ``"always"``; files written since name it.
+* v3, 2026-11-27, later (no new version, as above): the slip-target loop caps each target at 20 % of
+  the reference speed (``slip_target_max_creep=0.2``, the new default; 0 is the loop before):
+  a target fixed in km/h became a creep near locking as the train slowed (an 8 km/h target at
+  10 km/h), and on the UIC-Z1's development stops an 8 km/h target's longest lock was 13.5 s.
+  A policy file that does not name the cap was written before it and loads with 0; files
+  written since name it.
 """
 
 from __future__ import annotations
@@ -317,6 +326,7 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
+from wsp_env.baselines.slip_target import DEFAULT_MAX_CREEP, DEFAULT_RELEASE
 from wsp_env.core import kernel as K
 from wsp_env.core.braking import TERM_NAMES, BrakingCore, RewardConfig, ScenarioConfig
 from wsp_env.core.config import RailConfig, VehicleConfig
@@ -330,15 +340,21 @@ def make_core(n_envs: int, **kwargs: Any) -> BrakingCore:
     (``configs/wsp/classical.yaml``, with ``accelerometer`` ``classical_accel.yaml``) is the
     controller the residual acts on; with ``action_mode="slip_target"`` the slip-target inner
     loop (``baselines.slip_target.SlipTargetLoop``, with ``slip_target_gain_per_kmh``,
-    ``slip_target_lead_s`` and ``slip_target_release``, on the same tier's classical thresholds)
-    tracks the targets."""
-    from wsp_env.baselines.slip_target import SlipTargetLoop, check_loop_args, check_release
+    ``slip_target_lead_s``, ``slip_target_release`` and ``slip_target_max_creep``, on the same
+    tier's classical thresholds) tracks the targets."""
+    from wsp_env.baselines.slip_target import (
+        SlipTargetLoop,
+        check_loop_args,
+        check_max_creep,
+        check_release,
+    )
 
     # the loop's own arguments: checked in every mode (as residual_scale is), used in one
     gain, lead = check_loop_args(
         kwargs.pop("slip_target_gain_per_kmh", 0.2), kwargs.pop("slip_target_lead_s", 0.1)
     )
-    release = check_release(kwargs.pop("slip_target_release", "working"))
+    release = check_release(kwargs.pop("slip_target_release", DEFAULT_RELEASE))
+    max_creep = check_max_creep(kwargs.pop("slip_target_max_creep", DEFAULT_MAX_CREEP))
     mode = kwargs.get("action_mode")
     if mode in ("residual", "slip_target"):
         from wsp_env.baselines.classical import ClassicalWSP, load_wsp_config
@@ -348,7 +364,11 @@ def make_core(n_envs: int, **kwargs: Any) -> BrakingCore:
             kwargs.setdefault("residual_base", ClassicalWSP(load_wsp_config(tier=tier)))
         else:
             loop = SlipTargetLoop(
-                load_wsp_config(tier=tier), gain_per_kmh=gain, lead_s=lead, release=release
+                load_wsp_config(tier=tier),
+                gain_per_kmh=gain,
+                lead_s=lead,
+                release=release,
+                max_creep=max_creep,
             )
             kwargs.setdefault("slip_target_loop", loop)
     return BrakingCore(n_envs, **kwargs)
@@ -425,7 +445,8 @@ class WSPBrakingEnv(gym.Env):
         slip_target_max_kmh: float = 8.0,
         slip_target_gain_per_kmh: float = 0.2,
         slip_target_lead_s: float = 0.1,
-        slip_target_release: str = "working",
+        slip_target_release: str = DEFAULT_RELEASE,
+        slip_target_max_creep: float = DEFAULT_MAX_CREEP,
         memory_features: bool = False,
         stagger_reset_steps: int = 0,
     ) -> None:
@@ -451,7 +472,7 @@ class WSPBrakingEnv(gym.Env):
             slip_target_min_kmh=slip_target_min_kmh, slip_target_max_kmh=slip_target_max_kmh,
             slip_target_gain_per_kmh=slip_target_gain_per_kmh,
             slip_target_lead_s=slip_target_lead_s, slip_target_release=slip_target_release,
-            memory_features=memory_features,
+            slip_target_max_creep=slip_target_max_creep, memory_features=memory_features,
         )  # fmt: skip
         self.action_space = self.core.action_space()
         self.observation_space = self.core.observation_space()
@@ -609,7 +630,8 @@ class WSPBrakingVectorEnv(VectorEnv):
         slip_target_max_kmh: float = 8.0,
         slip_target_gain_per_kmh: float = 0.2,
         slip_target_lead_s: float = 0.1,
-        slip_target_release: str = "working",
+        slip_target_release: str = DEFAULT_RELEASE,
+        slip_target_max_creep: float = DEFAULT_MAX_CREEP,
         memory_features: bool = False,
         stagger_reset_steps: int = 0,
     ) -> None:
@@ -637,7 +659,7 @@ class WSPBrakingVectorEnv(VectorEnv):
             slip_target_min_kmh=slip_target_min_kmh, slip_target_max_kmh=slip_target_max_kmh,
             slip_target_gain_per_kmh=slip_target_gain_per_kmh,
             slip_target_lead_s=slip_target_lead_s, slip_target_release=slip_target_release,
-            memory_features=memory_features,
+            slip_target_max_creep=slip_target_max_creep, memory_features=memory_features,
         )  # fmt: skip
         self.num_envs = num_envs
         self.render_mode = render_mode

@@ -130,6 +130,7 @@ def input_spec(policy: SB3Policy) -> dict[str, Any]:
     the environment of ``policy``'s settings resolves them (the ONNX metadata's ``inputs``)."""
     import dataclasses
 
+    from wsp_env.baselines.slip_target import MAX_CREEP_FLOOR_KMH
     from wsp_env.core import braking as B
     from wsp_env.core import kernel as K
     from wsp_env.envs import make_core
@@ -186,6 +187,10 @@ def input_spec(policy: SB3Policy) -> dict[str, Any]:
             # last period or a wheel's measured slip exceeds max(kmh, rel x the reference)
             "working_band_kmh": loop.active_slip * 3.6,
             "working_band_rel": loop.active_slip_rel,
+            # each target at most this fraction of the reference speed or the floor, where
+            # that is more (0: no cap)
+            "max_creep": loop.max_creep,
+            "max_creep_floor_kmh": MAX_CREEP_FLOOR_KMH,
             "tier": tier,
             "wsp": dataclasses.asdict(loop.cfg),
         }

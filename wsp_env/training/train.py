@@ -585,7 +585,7 @@ def _train(
         if ckpt is None:
             raise ConfigError(f"{resume}: no checkpoint to resume from (checkpoints/step_N)")
         cfg = parse_train_config(read_yaml(resume / CONFIG_NAME), str(resume / CONFIG_NAME))
-        cfg = pin_release_gate(cfg, started_before_gate=True)
+        cfg = pin_loop_settings(cfg, started_before=True)
         if out.resolve() != resume.resolve() and out.exists() and any(out.iterdir()):
             raise ConfigError(f"{out}: exists and is not empty; not overwriting")
     else:
@@ -594,7 +594,7 @@ def _train(
         cfg = config if isinstance(config, TrainConfig) else load_train_config(config)
         if seed is not None:
             cfg = dataclasses.replace(cfg, seed=seed)
-        cfg = pin_release_gate(cfg, started_before_gate=False)
+        cfg = pin_loop_settings(cfg, started_before=False)
         if out.exists() and any(out.iterdir()):
             raise ConfigError(f"{out}: exists and is not empty (use --resume {out} to continue)")
     cls = algo_class(cfg.algo)
@@ -817,15 +817,16 @@ __all__ = [
 ]
 
 
-def pin_release_gate(cfg: TrainConfig, started_before_gate: bool) -> TrainConfig:
-    """A slip-target run's config with its loop's periodic-release gate named, as it is written
-    to the run folder (``config.yaml``): a new run gets the default (``"working"``); a run folder
-    whose config does not name it was started before the gate existed and resumes with the loop
-    it began with (``policy.LEGACY_SLIP_TARGET_RELEASE``)."""
-    from wsp_env.policy import LEGACY_SLIP_TARGET_RELEASE
+def pin_loop_settings(cfg: TrainConfig, started_before: bool) -> TrainConfig:
+    """A slip-target run's config with its loop's later settings (``policy.
+    LEGACY_LOOP_SETTINGS``: the periodic release's gate, the creep cap) named, as it is written
+    to the run folder (``config.yaml``): a new run gets the defaults (``policy.
+    loop_settings_now``); a run folder whose config does not name one was started before that
+    setting existed and resumes with the loop it began with (the setting's legacy value)."""
+    from wsp_env.policy import LEGACY_LOOP_SETTINGS, loop_settings_now
 
     kw = cfg.env_kwargs
-    if kw.get("action_mode") != "slip_target" or "slip_target_release" in kw:
+    if kw.get("action_mode") != "slip_target" or all(k in kw for k in LEGACY_LOOP_SETTINGS):
         return cfg
-    gate = LEGACY_SLIP_TARGET_RELEASE if started_before_gate else "working"
-    return dataclasses.replace(cfg, env_kwargs={**kw, "slip_target_release": gate})
+    fill = LEGACY_LOOP_SETTINGS if started_before else loop_settings_now()
+    return dataclasses.replace(cfg, env_kwargs={**fill, **kw})

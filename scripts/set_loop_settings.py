@@ -1,11 +1,13 @@
-"""A copy of a slip-target model file with its loop's periodic-release gate set
-(``slip_target_release``: ``working`` or ``always``; docs/environment.md), so that a policy
-trained before the gate existed (which loads with ``always``, the loop it was made with) can be
-scored with the gated loop, or the other way round. The copy takes its observation statistics
-(``STEM.vecnormalize.pkl``) along; nothing else of the model changes.
+"""A copy of a slip-target model file with its loop's later settings set: the periodic
+release's gate (``--release``: ``slip_target_release``, ``working`` or ``always``) and the creep
+cap (``--max-creep``: ``slip_target_max_creep``, 0-1, 0 no cap; docs/environment.md), so that a
+policy trained before a setting existed (which loads with the loop it was made with:
+``policy.LEGACY_LOOP_SETTINGS``) can be scored with today's loop, or the other way round. The
+copy takes its observation statistics (``STEM.vecnormalize.pkl``) along; nothing else of the
+model changes.
 
-    .venv/bin/python scripts/set_release_gate.py runs/train/bc_st_v3_s1/student.zip \\
-        runs/s15/uic_v3_gated/student.zip working
+    .venv/bin/python scripts/set_loop_settings.py runs/train/bc_st_v3_s1/student.zip \\
+        runs/s16/uic_v3_capped/student.zip --release working --max-creep 0.2
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ import shutil
 import sys
 from pathlib import Path
 
-from wsp_env.baselines.slip_target import RELEASE_GATES
+from wsp_env.baselines.slip_target import RELEASE_GATES, check_max_creep
 from wsp_env.policy import model_metadata, write_model_metadata
 
 
@@ -44,9 +46,21 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("model", type=Path, help="a slip-target model file (.zip)")
     ap.add_argument("out", type=Path, help="the copy to write (.zip)")
-    ap.add_argument("gate", choices=RELEASE_GATES)
+    ap.add_argument("--release", choices=RELEASE_GATES, help="the periodic release's gate")
+    ap.add_argument("--max-creep", help="the cap on the target, a fraction of the reference speed")
     args = ap.parse_args(argv)
     try:
+        settings: dict = {}
+        if args.release is not None:
+            settings["slip_target_release"] = args.release
+        if args.max_creep is not None:
+            try:
+                value = float(args.max_creep)
+            except ValueError:
+                raise ValueError(f"--max-creep: a number, got {args.max_creep!r}") from None
+            settings["slip_target_max_creep"] = check_max_creep(value)
+        if not settings:
+            raise ValueError("nothing to set: give --release and/or --max-creep")
         if args.out.suffix != ".zip":
             raise ValueError(f"{args.out}: the copy must be a .zip model file")
         if args.out.resolve() == args.model.resolve():
@@ -58,7 +72,7 @@ def main(argv: list[str] | None = None) -> int:
         norm = args.model.with_suffix(".vecnormalize.pkl")
         if meta.get("obs_normalization") and not norm.exists():
             raise ValueError(f"{args.model}: trained on normalised observations, {norm} missing")
-        meta["env_kwargs"]["slip_target_release"] = args.gate
+        meta["env_kwargs"].update(settings)
         meta["name"] = f"{args.out.parent.name}/{args.out.stem}"
         # the model file and, where the model has one, its observation statistics
         pairs = [(args.model, args.out)]
@@ -69,9 +83,9 @@ def main(argv: list[str] | None = None) -> int:
                 raise ValueError(f"{path}: exists; not overwriting")
         _write(pairs, meta)
     except (OSError, ValueError) as err:
-        print(f"set_release_gate: {err}", file=sys.stderr)
+        print(f"set_loop_settings: {err}", file=sys.stderr)
         return 2
-    print(f"{args.out}: slip_target_release {args.gate}")
+    print(f"{args.out}: " + ", ".join(f"{k} {v}" for k, v in settings.items()))
     return 0
 
 

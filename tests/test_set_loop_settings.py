@@ -1,6 +1,6 @@
-"""scripts/set_release_gate.py: a copy of a slip-target model file with its loop's release gate
-set; a file written before the gate loads with ``always``; bad input is one line, nothing
-written."""
+"""scripts/set_loop_settings.py: a copy of a slip-target model file with its loop's later
+settings set (the release gate, the creep cap); a file written before them loads with the old
+loop (``always``, no cap); bad input is one line, nothing written."""
 
 from __future__ import annotations
 
@@ -11,14 +11,15 @@ from pathlib import Path
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "scripts"))
-import set_release_gate
+import set_loop_settings
 
 from wsp_env.policy import model_metadata, pretrained_dir, write_model_metadata
 
 
 def _slip_target_model(tmp_path: Path) -> Path:
     """The shipped model's file with metadata of a slip-target model written before the gate
-    (no ``slip_target_release``): only the metadata matters here."""
+    and the cap (no ``slip_target_release``, no ``slip_target_max_creep``): only the metadata
+    matters here."""
     src = pretrained_dir() / "ppo_bc_uic_z1.zip"
     path = tmp_path / "old" / "student.zip"
     path.parent.mkdir()
@@ -27,20 +28,25 @@ def _slip_target_model(tmp_path: Path) -> Path:
     meta = model_metadata(src)
     meta["env_kwargs"] = {**meta["env_kwargs"], "action_mode": "slip_target"}
     meta["env_kwargs"].pop("slip_target_release", None)
+    meta["env_kwargs"].pop("slip_target_max_creep", None)
     write_model_metadata(path, meta)
     return path
 
 
-def test_the_copy_names_the_gate_and_keeps_the_rest(tmp_path, capsys):
+def test_the_copy_names_the_settings_and_keeps_the_rest(tmp_path, capsys):
     old = _slip_target_model(tmp_path)
     assert model_metadata(old)["env_kwargs"]["slip_target_release"] == "always"
+    assert model_metadata(old)["env_kwargs"]["slip_target_max_creep"] == 0.0
     new = tmp_path / "new" / "student.zip"
-    assert set_release_gate.main([str(old), str(new), "working"]) == 0
+    argv = [str(old), str(new), "--release", "working", "--max-creep", "0.2"]
+    assert set_loop_settings.main(argv) == 0
     meta, before = model_metadata(new), model_metadata(old)
     assert meta["env_kwargs"]["slip_target_release"] == "working"
+    assert meta["env_kwargs"]["slip_target_max_creep"] == 0.2
     assert meta["name"] == "new/student"
-    rest = {k: v for k, v in meta["env_kwargs"].items() if k != "slip_target_release"}
-    assert rest == {k: v for k, v in before["env_kwargs"].items() if k != "slip_target_release"}
+    keys = ("slip_target_release", "slip_target_max_creep")
+    rest = {k: v for k, v in meta["env_kwargs"].items() if k not in keys}
+    assert rest == {k: v for k, v in before["env_kwargs"].items() if k not in keys}
     assert (
         new.with_suffix(".vecnormalize.pkl").read_bytes()
         == old.with_suffix(".vecnormalize.pkl").read_bytes()
@@ -48,33 +54,47 @@ def test_the_copy_names_the_gate_and_keeps_the_rest(tmp_path, capsys):
     assert sorted(p.name for p in new.parent.iterdir()) == [
         "student.vecnormalize.pkl", "student.zip",
     ]  # fmt: skip
-    assert "slip_target_release working" in capsys.readouterr().out
+    assert "slip_target_release working, slip_target_max_creep 0.2" in capsys.readouterr().out
+    # one setting alone: the other stays as the model had it
+    gate_only = tmp_path / "gate" / "student.zip"
+    assert set_loop_settings.main([str(old), str(gate_only), "--release", "working"]) == 0
+    kw = model_metadata(gate_only)["env_kwargs"]
+    assert (kw["slip_target_release"], kw["slip_target_max_creep"]) == ("working", 0.0)
 
 
 def test_an_existing_copy_or_a_failed_write_leaves_nothing_new(tmp_path, capsys, monkeypatch):
     old = _slip_target_model(tmp_path)
     new = tmp_path / "new" / "student.zip"
-    assert set_release_gate.main([str(old), str(new), "working"]) == 0
+    assert set_loop_settings.main([str(old), str(new), "--release", "working"]) == 0
     before = new.read_bytes()
-    assert set_release_gate.main([str(old), str(new), "always"]) == 2
+    assert set_loop_settings.main([str(old), str(new), "--release", "always"]) == 2
     assert "exists; not overwriting" in capsys.readouterr().err
     assert new.read_bytes() == before
 
     def fail(path, meta):
         raise OSError(f"{path}: disk full")
 
-    monkeypatch.setattr(set_release_gate, "write_model_metadata", fail)
+    monkeypatch.setattr(set_loop_settings, "write_model_metadata", fail)
     other = tmp_path / "other" / "student.zip"
-    assert set_release_gate.main([str(old), str(other), "working"]) == 2
+    assert set_loop_settings.main([str(old), str(other), "--max-creep", "0.2"]) == 2
     assert "disk full" in capsys.readouterr().err
     assert not other.parent.exists()
 
 
-@pytest.mark.parametrize("case", ["continuous", "same", "suffix", "missing"])
+@pytest.mark.parametrize(
+    "case", ["continuous", "same", "suffix", "missing", "nothing", "creep_range", "creep_text"]
+)
 def test_bad_input_is_one_line_and_writes_nothing(tmp_path, capsys, case):
     model = _slip_target_model(tmp_path)
     out = tmp_path / "new" / "student.zip"
-    if case == "continuous":
+    settings = ["--release", "working"]
+    if case == "nothing":
+        settings, want = [], "nothing to set"
+    elif case == "creep_range":
+        settings, want = ["--max-creep", "1.5"], "slip_target_max_creep"
+    elif case == "creep_text":
+        settings, want = ["--max-creep", "much"], "--max-creep: a number"
+    elif case == "continuous":
         model = pretrained_dir() / "ppo_bc_uic_z1.zip"
         want = "not a slip-target model"
     elif case == "same":
@@ -86,7 +106,7 @@ def test_bad_input_is_one_line_and_writes_nothing(tmp_path, capsys, case):
     else:
         model = tmp_path / "nowhere.zip"
         want = "nowhere.zip"
-    assert set_release_gate.main([str(model), str(out), "working"]) == 2
+    assert set_loop_settings.main([str(model), str(out), *settings]) == 2
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1 and want in err
     assert not (tmp_path / "new").exists()
