@@ -20,8 +20,12 @@ beat, however it picks it (by return: none returns more on any stop, so none sco
 distance: none has a lower mean of the per-stop ratios to the classical WSP's stop), with its
 score, worst stop and longest lock; then the table as YAML for a config. Never reads the
 sealed set (refuses a file of it); the files must be of one vehicle and tier, each target in one.
-Reads only the targets named ``slip_target_<x>kmh``: the gated loop's since 2026-11-27 (a file
-made before then named its ungated runs so; ``slip_target_<x>kmh_always`` is skipped).
+Reads only the targets named ``slip_target_<x>kmh``: the environment's default loop when the
+file was made (gated and capped since 2026-11-27; a file made before the gate named its ungated
+runs so, one made between the gate and the creep cap its uncapped runs; a loop other than the
+default is named in the policy's name, ``slip_target_<x>kmh_always``, ``..._creep0``, and
+skipped). Files whose loops ran on different classical thresholds (``slip_target_loop``: the
+tier's since 2026-11-27, ``WSPConfig()``'s defaults before) are not merged.
 
     .venv/bin/python scripts/choose_rail_targets.py runs/s14/regiolis_targets_dev.json \\
         [runs/s14/more_targets_dev.json] [--worst 1.10]
@@ -48,6 +52,13 @@ def _keyed(rows: list[dict]) -> dict[tuple, dict]:
     return {(r["scenario"], int(r["seed"])): r for r in rows}
 
 
+def _thresholds(data: dict[str, Any]) -> str:
+    """Which classical thresholds the file's loop ran on (``slip_target_benchmark.py
+    --thresholds``; a file without the record was made before it: ``WSPConfig()``'s
+    defaults)."""
+    return (data.get("slip_target_loop") or {}).get("thresholds", "default")
+
+
 def load(paths: list[str]) -> tuple[dict[str, Any], dict[float, dict[tuple, dict]]]:
     """The first file's content (its classical WSP's and locked wheels' runs, its summary) and
     each constant target's runs, keyed by (scenario, seed)."""
@@ -68,6 +79,9 @@ def load(paths: list[str]) -> tuple[dict[str, Any], dict[float, dict[tuple, dict
                 if data.get(field) != first.get(field):
                     raise ValueError(f"{path}: {field} {data.get(field)!r}, not "
                                      f"{first.get(field)!r} as {paths[0]}")  # fmt: skip
+            if _thresholds(data) != _thresholds(first):
+                raise ValueError(f"{path}: the loop on {_thresholds(data)} thresholds, not on "
+                                 f"{_thresholds(first)} as {paths[0]}")  # fmt: skip
             if set(base) != set(_keyed(first["run_results"]["classical"])):
                 raise ValueError(f"{path}: not the same stops as {paths[0]}")
         else:

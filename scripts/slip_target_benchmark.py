@@ -3,8 +3,13 @@ gives, the baseline a policy trained in ``action_mode="slip_target"`` must beat 
 
 Each ``--target`` is a ``baselines.slip_target.SlipTargetPolicy`` (every valve asks for that
 measured sliding speed, tracked every 20 ms by the same ``SlipTargetLoop`` the environment's
-mode uses), scored through ``evaluation.benchmark.run_benchmark`` like any other controller:
-the same stops, sensors, watchdog and score.
+mode uses, on the same thresholds: the tier's frozen classical WSP's), scored through
+``evaluation.benchmark.run_benchmark`` like any other controller: the same stops, sensors,
+watchdog and score. ``--thresholds default`` runs the loop on ``WSPConfig()``'s defaults
+instead, as this script did before 2026-11-27 (every constant-target figure measured with it
+until then: the wheels tier's 2.0 m/s^2 recovery hold and 3 s release interval where the
+``wheels+accel`` tier's are 3.27 m/s^2 and 4.6 s); the file records which
+(``slip_target_loop``), and ``choose_rail_targets.py`` does not merge files of different loops.
 
     .venv/bin/python scripts/slip_target_benchmark.py --tier wheels+accel --target 4.25 \\
         [--target 2 --target 6] [--runs 300] [--stops development] [--vehicle regiolis] \\
@@ -24,6 +29,7 @@ import sys
 from pathlib import Path
 
 from wsp_env import BENCHMARK_VEHICLES
+from wsp_env.baselines.classical import WSPConfig, load_wsp_config
 from wsp_env.baselines.oracle import SlipTargetOracle
 from wsp_env.baselines.slip_target import (
     DEFAULT_MAX_CREEP,
@@ -63,6 +69,13 @@ def main(argv: list[str] | None = None) -> int:
         help="the loop's cap on each target, a fraction of the reference speed (0: none; "
         f"repeatable; default {DEFAULT_MAX_CREEP})",
     )
+    ap.add_argument(
+        "--thresholds",
+        choices=("tier", "default"),
+        default="tier",
+        help="the loop's classical thresholds: the tier's frozen file (the environment's mode) "
+        "or WSPConfig()'s defaults (this script before 2026-11-27)",
+    )
     args = ap.parse_args(argv)
     targets = args.target or [4.25]
     if any(not 0.0 <= t <= 30.0 for t in targets):
@@ -73,21 +86,24 @@ def main(argv: list[str] | None = None) -> int:
         print("--max-creep: a fraction of the reference speed in [0, 1]", file=sys.stderr)
         return 2
     loops = [(g, c) for g in args.release or [DEFAULT_RELEASE] for c in caps]
+    wsp = load_wsp_config(tier=args.tier) if args.thresholds == "tier" else WSPConfig()
     policies: list = [
-        SlipTargetPolicy(t, SlipTargetLoop(release=g, max_creep=c))
+        SlipTargetPolicy(t, SlipTargetLoop(wsp, release=g, max_creep=c))
         for g, c in loops
         for t in targets
     ]
     if args.rail_teacher:  # under each loop too (named where it is not the default)
         for g, c in loops:
             teacher = SlipTargetOracle()
-            teacher.loop = SlipTargetLoop(release=g, max_creep=c)
+            teacher.loop = SlipTargetLoop(wsp, release=g, max_creep=c)
             teacher.name += "" if g == DEFAULT_RELEASE else f"_{g}"
             teacher.name += "" if c == DEFAULT_MAX_CREEP else f"_creep{c:g}"
             policies.append(teacher)
     result = run_benchmark(policies, vehicle=args.vehicle, tier=args.tier, runs=args.runs,
                            stop_set=args.stops, keep_runs=args.json_path is not None,
                            progress=lambda m: print(m, file=sys.stderr))  # fmt: skip
+    # which loop made the runs (choose_rail_targets.py refuses to merge files of two)
+    result["slip_target_loop"] = {"thresholds": args.thresholds}
     print_benchmark(result)
     if args.json_path:
         path = Path(args.json_path)

@@ -28,13 +28,15 @@ CLASSICAL = {"sliding_energy_kJ_mean": 20.0, "air_litres_mean": 10.0, "max_lock_
              "max_sliding_kmh_max": 5.0}  # fmt: skip
 
 
-def _write(path, policies, stops="development", vehicle="regiolis"):
+def _write(path, policies, stops="development", vehicle="regiolis", thresholds=None):
     runs = {"none": _runs([300.0] * 4, [-15.0] * 4),
             "classical": _runs([100.0] * 4, [-5.0] * 4, locks=(0.0, 0.0, 0.3, 0.1)),
             **policies}  # fmt: skip
-    path.write_text(json.dumps({"stops": stops, "vehicle": vehicle, "tier": "wheels+accel",
-                                "policies": {"classical": CLASSICAL},
-                                "run_results": runs}))  # fmt: skip
+    data = {"stops": stops, "vehicle": vehicle, "tier": "wheels+accel",
+            "policies": {"classical": CLASSICAL}, "run_results": runs}  # fmt: skip
+    if thresholds is not None:  # slip_target_benchmark.py records it since 2026-11-27
+        data["slip_target_loop"] = {"thresholds": thresholds}
+    path.write_text(json.dumps(data))
     return str(path)
 
 
@@ -95,7 +97,11 @@ def test_a_sealed_file_or_other_stops_are_refused_in_one_line(tmp_path, capsys):
     other = _write(tmp_path / "2.json", {"slip_target_3kmh": _runs([90.0] * 4, [-4.0] * 4)},
                    vehicle="uic_z1")  # fmt: skip
     short = _write(tmp_path / "3.json", {"slip_target_4kmh": _runs([90.0] * 4, [-4.0] * 4)[:3]})
+    # a file of the loop on the tier's thresholds and one made before they were recorded
+    tier = _write(tmp_path / "4.json", {"slip_target_5kmh": _runs([90.0] * 4, [-4.0] * 4)},
+                  thresholds="tier")  # fmt: skip
     for files, says in (([one, other], "vehicle 'uic_z1', not 'regiolis'"),
+                        ([one, tier], "the loop on tier thresholds, not on default"),
                         ([one, one], "slip_target_2kmh is in an earlier file too"),
                         ([short], "did not run every stop")):  # fmt: skip
         assert choose_rail_targets.main(files) == 2

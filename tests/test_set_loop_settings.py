@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import shutil
 import sys
+import zipfile
 from pathlib import Path
 
 import pytest
@@ -13,7 +14,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "scripts"))
 import set_loop_settings
 
-from wsp_env.policy import model_metadata, pretrained_dir, write_model_metadata
+from wsp_env.policy import META_NAME, model_metadata, pretrained_dir, write_model_metadata
 
 
 def _slip_target_model(tmp_path: Path) -> Path:
@@ -110,3 +111,32 @@ def test_bad_input_is_one_line_and_writes_nothing(tmp_path, capsys, case):
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1 and want in err
     assert not (tmp_path / "new").exists()
+
+
+@pytest.mark.parametrize(
+    ("named", "want"),
+    [
+        ({}, ("always", 0.0)),  # before the gate
+        ({"slip_target_release": "working"}, ("working", 0.0)),  # the gate, before the cap
+        ({"slip_target_release": "working", "slip_target_max_creep": 0.2}, ("working", 0.2)),
+        ({"slip_target_release": "always", "slip_target_max_creep": 0.3}, ("always", 0.3)),
+    ],
+)
+def test_a_model_without_its_own_entry_takes_the_loop_its_run_folder_names(tmp_path, named, want):
+    """A model file without its metadata entry (written before entries existed) is read from
+    its run folder's ``config.yaml``: the loop's later settings it names are kept, each one it
+    does not name gets the loop before that setting."""
+    import yaml
+
+    src = pretrained_dir() / "ppo_bc_uic_z1.zip"
+    run = tmp_path / "run"
+    run.mkdir()
+    path = run / "model.zip"
+    with zipfile.ZipFile(src) as z, zipfile.ZipFile(path, "w") as out:
+        for n in z.namelist():
+            if n != META_NAME:
+                out.writestr(n, z.read(n))
+    env_kwargs = {"vehicle": "uic_z1", "action_mode": "slip_target", **named}
+    (run / "config.yaml").write_text(yaml.safe_dump({"algo": "ppo", "env_kwargs": env_kwargs}))
+    kw = model_metadata(path)["env_kwargs"]
+    assert (kw["slip_target_release"], kw["slip_target_max_creep"]) == want

@@ -21,7 +21,7 @@ import yaml
 from gymnasium.utils.env_checker import check_env
 from test_train import train_config
 
-from wsp_env.baselines.classical import load_wsp_config
+from wsp_env.baselines.classical import WSPConfig, load_wsp_config
 from wsp_env.baselines.slip_target import MAX_CREEP_FLOOR_KMH, SlipTargetLoop, SlipTargetPolicy
 from wsp_env.cli import main
 from wsp_env.core import kernel as K
@@ -347,9 +347,10 @@ def test_the_periodic_release_begins_only_while_the_loop_works():
 
 
 def test_the_creep_cap_asks_for_at_most_its_fraction_of_the_reference():
-    """The cap alone, on a hand-made observation (every wheel 1 km/h under the reference, the
-    cylinders at half the demand): at 100 km/h an 8 km/h target is under 20 % of the reference
-    and the capped loop asks for what the uncapped one does; at 15 km/h it asks for what the
+    """The cap alone, on a hand-made observation (every wheel 1 km/h under the reference, 6 at
+    100 km/h, so that no request saturates; the cylinders at half the demand): at 100 km/h an
+    8 km/h target is under 20 % of the reference and the capped loop asks for what the
+    uncapped one does (which a 7 km/h target changes); at 15 km/h it asks for what the
     uncapped loop asks for a 3 km/h target (20 % of 15 km/h); at 6 km/h for 2 km/h, the floor
     (20 % would be 1.2), where a 1 km/h target stays 1 km/h; 0 is no cap."""
     core = make_core(1, action_mode="slip_target")
@@ -358,9 +359,9 @@ def test_the_creep_cap_asks_for_at_most_its_fraction_of_the_reference():
     free = make_core(1, action_mode="slip_target", slip_target_max_creep=0.0).loop
     assert free.max_creep == 0.0
 
-    def obs(v_ref_kmh: float) -> np.ndarray:
+    def obs(v_ref_kmh: float, slip_kmh: float = 1.0) -> np.ndarray:
         o = np.zeros((1, core.kernel_obs_dim))
-        o[:, :na] = (v_ref_kmh - 1.0) / 3.6 / capped.v_scale
+        o[:, :na] = (v_ref_kmh - slip_kmh) / 3.6 / capped.v_scale
         o[:, 3 * na : 4 * na] = 0.5  # / p_max
         o[:, 4 * na] = 1.0  # the demand / p_max
         o[:, 4 * na + 1] = v_ref_kmh / 3.6 / capped.v_scale
@@ -369,8 +370,9 @@ def test_the_creep_cap_asks_for_at_most_its_fraction_of_the_reference():
     target = np.full((1, core.n_valves), 8.0)
     for loop in (capped, free):
         loop.reset(np.array([0]))
-    fast = obs(100.0)
+    fast = obs(100.0, slip_kmh=6.0)
     assert np.array_equal(capped.command(fast, target), free.command(fast, target))
+    assert not np.allclose(free.command(fast, target), free.command(fast, target - 1.0))
     slow = obs(15.0)
     want = free.command(slow, np.full_like(target, 3.0))
     assert np.allclose(capped.command(slow, target), want, rtol=0, atol=1e-12)
@@ -381,6 +383,24 @@ def test_the_creep_cap_asks_for_at_most_its_fraction_of_the_reference():
     assert np.allclose(capped.command(slower, target), want, rtol=0, atol=1e-12)
     low = np.full_like(target, 1.0)
     assert np.array_equal(capped.command(slower, low), free.command(slower, low))
+
+
+def test_the_creep_cap_reaches_the_loop_from_every_entry_point():
+    """The single and vector environments and a training config pass ``slip_target_max_creep``
+    to the loop (the default 0.2; the configs measured before the cap pin 0)."""
+    from wsp_env.core.config import configs_root
+    from wsp_env.training.config import load_train_config
+
+    assert WSPBrakingEnv(action_mode="slip_target").core.loop.max_creep == 0.2
+    vec = WSPBrakingVectorEnv(num_envs=2, action_mode="slip_target", slip_target_max_creep=0.0)
+    assert vec.core.loop.max_creep == 0.0
+    single = WSPBrakingEnv(action_mode="slip_target", slip_target_max_creep=0.3)
+    assert single.core.loop.max_creep == 0.3
+    train = configs_root() / "train"
+    for name, cap in (("ppo_bc_slip_target_accel_uic_z1", 0.0),
+                      ("ppo_bc_slip_target_capped_accel_uic_z1", 0.2)):  # fmt: skip
+        kw = load_train_config(str(train / f"{name}.yaml")).env_kwargs
+        assert WSPBrakingVectorEnv(num_envs=1, **kw).core.loop.max_creep == cap, name
 
 
 def _capped_stop(max_creep: float, target_kmh: float) -> tuple[float, float]:
@@ -576,4 +596,38 @@ def test_constant_targets_are_scored_on_the_sealed_set_like_any_controller(tmp_p
     assert set(result["policies"]) == names
     assert p["score"] is not None and 0.0 < p["score"] < 2.0  # between locked wheels and beyond
     assert "slip_target_4.25kmh" in capsys.readouterr().out
+    assert result["slip_target_loop"] == {"thresholds": "tier"}
     assert stb.main(["--target", "-1"]) == 2
+
+
+def test_the_constant_target_script_runs_the_environments_loop(monkeypatch):
+    """``scripts/slip_target_benchmark.py`` runs each target, and the teacher, on the loop of
+    the environment's mode: the tier's classical thresholds, the gate and cap asked for
+    (``--thresholds default``: ``WSPConfig()``'s, the script before 2026-11-27)."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "scripts"))
+    try:
+        import slip_target_benchmark as stb
+    finally:
+        sys.path.pop(0)
+    seen: list = []
+
+    def fake(policies, **kw):
+        seen.append(policies)
+        return {"policies": {}, "runs": 0}
+
+    monkeypatch.setattr(stb, "run_benchmark", fake)
+    monkeypatch.setattr(stb, "print_benchmark", lambda result: None)
+    argv = ["--target", "3", "--rail-teacher", "--max-creep", "0", "--release", "always"]
+    assert stb.main(argv) == 0
+    tier = make_core(1, action_mode="slip_target", accelerometer=True).loop.cfg
+    assert tier == load_wsp_config(tier="wheels+accel") != WSPConfig()
+    for p in seen[-1]:
+        assert (p.loop.cfg, p.loop.release, p.loop.max_creep) == (tier, "always", 0.0)
+    assert [p.name for p in seen[-1]] == [
+        "slip_target_3kmh_always_creep0", "oracle_target_rail_always_creep0",
+    ]  # fmt: skip
+    assert stb.main(["--target", "3", "--thresholds", "default"]) == 0
+    assert seen[-1][0].loop.cfg == WSPConfig()

@@ -247,7 +247,7 @@ num_envs=N, **kwargs)``:
 | ``slip_target_gain_per_kmh`` | float | ``0.2`` | slip-target mode: the inner loop's demand fraction per km/h of slip error, (0, 10] |
 | ``slip_target_lead_s`` | float | ``0.1`` | slip-target mode: the inner loop's lead on the measured wheel deceleration, s, [0, 1] |
 | ``slip_target_release`` | str | ``"working"`` | slip-target mode: when the inner loop's periodic release may begin: ``working``, only while the loop works (some axle asked for under the full demand in the last period, or a wheel's measured slip is beyond the estimator's working band), as the classical WSP; ``always``, whenever the reference's age allows (the loop before 2026-11-27; a policy file that does not name it loads with it) |
-| ``slip_target_max_creep`` | float | ``0.2`` | slip-target mode: each target at most this fraction of the reference speed (a target fixed in km/h grows into a near-lock as the train slows), [0, 1]; 0: no cap (the loop before 2026-11-27's cap; a policy file that does not name it loads with 0) |
+| ``slip_target_max_creep`` | float | ``0.2`` | slip-target mode: each target at most this fraction of the reference speed, or 2 km/h where that is more (a lower target is kept; a target fixed in km/h grows into a near-lock as the train slows), [0, 1]; 0: no cap (the loop before 2026-11-27's cap; a policy file that does not name it loads with 0) |
 | ``stagger_reset_steps`` | int | ``0`` | vector class only (the single class takes only 0), a training option: ``reset`` advances each environment a random, seeded number of steps below this into a stop, driven by the classical WSP, so that stops do not all end together (``WSPBrakingVectorEnv``'s docstring); 0: off |
 | ``memory_features`` | bool | False | append the memory features (Observation Space): per axle time in the current slide, time since the last release, sliding-energy estimate |
 | ``substep_s`` | float | ``0.001`` | the physics substep (linearly implicit; docs/physics.md) |
@@ -305,12 +305,12 @@ num_envs=N, **kwargs)``:
   another every 3 s of a train whose wheels all gripped (dry, 80 km/h, 3 km/h: 221.0 m against
   207.8 m). A policy file that does not name the gate was written before it and loads with
   ``"always"``; files written since name it.
-* v3, 2026-11-27, later (no new version, as above): the slip-target loop caps each target at 20 % of
-  the reference speed (``slip_target_max_creep=0.2``, the new default; 0 is the loop before):
-  a target fixed in km/h became a creep near locking as the train slowed (an 8 km/h target at
-  10 km/h), and on the UIC-Z1's development stops an 8 km/h target's longest lock was 13.5 s.
-  A policy file that does not name the cap was written before it and loads with 0; files
-  written since name it.
+* v3, 2026-11-27, later (no new version, as above): the slip-target loop caps each target
+  at 20 % of the reference speed, never below 2 km/h (``slip_target_max_creep=0.2``, the new
+  default; 0 is the loop before): a target fixed in km/h became a creep near locking as the
+  train slowed (an 8 km/h target at 10 km/h), and on the UIC-Z1's development stops an 8 km/h
+  target's longest lock was 13.5 s. A policy file that does not name the cap was written
+  before it and loads with 0; files written since name it.
 """
 
 from __future__ import annotations
