@@ -255,6 +255,13 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         return self.command(obs, target_kmh)
 
 
+def loop_suffix(loop: SlipTargetLoop) -> str:
+    """What a policy's name adds for a loop whose settings are not the defaults:
+    ``_<release>`` for the gate, ``_creep<x>`` for the cap (``""`` for the default loop)."""
+    gate = "" if loop.release == DEFAULT_RELEASE else f"_{loop.release}"
+    return gate + ("" if loop.max_creep == DEFAULT_MAX_CREEP else f"_creep{loop.max_creep:g}")
+
+
 class SlipTargetPolicy:
     """A constant target sliding speed on every valve, tracked by ``SlipTargetLoop``: a policy
     (``bind`` / ``reset`` / ``act``) for any continuous-action environment, reading the kernel's
@@ -265,10 +272,7 @@ class SlipTargetPolicy:
     def __init__(self, target_kmh: float, loop: SlipTargetLoop | None = None) -> None:
         self.target_kmh = float(target_kmh)
         self.loop = loop or SlipTargetLoop()
-        # the loop's settings in the name where they are not the defaults
-        gate = "" if self.loop.release == DEFAULT_RELEASE else f"_{self.loop.release}"
-        cap = "" if self.loop.max_creep == DEFAULT_MAX_CREEP else f"_creep{self.loop.max_creep:g}"
-        self.name = f"slip_target_{self.target_kmh:g}kmh{gate}{cap}"
+        self.name = f"slip_target_{self.target_kmh:g}kmh{loop_suffix(self.loop)}"
 
     def bind(self, core: Any) -> None:
         self.loop.bind(core)

@@ -37,6 +37,7 @@ from wsp_env.baselines.slip_target import (
     RELEASE_GATES,
     SlipTargetLoop,
     SlipTargetPolicy,
+    loop_suffix,
 )
 from wsp_env.cli.printing import print_benchmark
 from wsp_env.evaluation.benchmark import SEALED_RUNS, STOP_SETS, run_benchmark
@@ -96,8 +97,7 @@ def main(argv: list[str] | None = None) -> int:
         for g, c in loops:
             teacher = SlipTargetOracle()
             teacher.loop = SlipTargetLoop(wsp, release=g, max_creep=c)
-            teacher.name += "" if g == DEFAULT_RELEASE else f"_{g}"
-            teacher.name += "" if c == DEFAULT_MAX_CREEP else f"_creep{c:g}"
+            teacher.name += loop_suffix(teacher.loop)
             policies.append(teacher)
     result = run_benchmark(policies, vehicle=args.vehicle, tier=args.tier, runs=args.runs,
                            stop_set=args.stops, keep_runs=args.json_path is not None,
