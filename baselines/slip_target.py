@@ -85,7 +85,7 @@ from typing import Any
 
 import numpy as np
 
-from wsp_env.baselines.classical import ArrayState, PeriodicRelease, WSPConfig
+from wsp_env.baselines.classical import ArrayState, PeriodicRelease, WSPConfig, load_wsp_config
 from wsp_env.core import kernel as K
 from wsp_env.core.config import ConfigError, check_number
 
@@ -126,8 +126,11 @@ def check_release(release: Any) -> str:
 
 class SlipTargetLoop(ArrayState, PeriodicRelease):
     """Valve commands that track per-valve target sliding speeds (module docstring). ``wsp``:
-    the classical WSP's thresholds it reuses (recovery, minimum speed, periodic release; the
-    frozen file of the sensor tier in the environment, ``envs.make_core``); ``release``: when a
+    the classical WSP's thresholds it reuses (recovery, minimum speed, periodic release); None:
+    the frozen file of the sensor tier of the core it binds to (``load_wsp_config``: with an
+    accelerometer ``wheels+accel``'s, else ``wheels``'), the thresholds the environment's mode
+    runs on (``envs.make_core``), so a loop built without them is that mode's loop (before
+    2026-11-28 it took ``WSPConfig()``'s defaults); ``release``: when a
     periodic release may begin (``RELEASE_GATES``): ``"working"``, only while the loop works
     (some axle's request was under the full demand in the last period, or a wheel's measured
     slip is beyond the estimator's working band: the kernel's test that the WSP works), as the
@@ -147,6 +150,7 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         release: str = DEFAULT_RELEASE,
         max_creep: float = DEFAULT_MAX_CREEP,
     ) -> None:
+        self.wsp_given = wsp  # None: the bound core's tier's thresholds (``bind``)
         self.cfg = wsp or WSPConfig()
         self.gain_per_kmh, self.lead_s = check_loop_args(gain_per_kmh, lead_s)
         self.release = check_release(release)
@@ -155,6 +159,9 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
     def bind(self, core: Any) -> None:
         """Attach to a ``BrakingCore``: its scales, valve map and batch size."""
         n, na = core.n_envs, core.n_axles
+        if self.wsp_given is None:  # the tier's frozen thresholds, as the environment's mode
+            tier = "wheels+accel" if getattr(core, "accelerometer", False) else "wheels"
+            self.cfg = load_wsp_config(tier=tier)
         self.n_axles = na
         self.dt = core.sim.control_period_s
         self.v_scale = core.obs_par[K.OP_SPEED_SCALE]
@@ -265,7 +272,8 @@ def loop_suffix(loop: SlipTargetLoop) -> str:
 class SlipTargetPolicy:
     """A constant target sliding speed on every valve, tracked by ``SlipTargetLoop``: a policy
     (``bind`` / ``reset`` / ``act``) for any continuous-action environment, reading the kernel's
-    part of the observation."""
+    part of the observation. Without ``loop``, the environment's default loop on the bound
+    core's tier's thresholds: bit for bit the slip-target mode holding that target."""
 
     privileged = False
 

@@ -631,3 +631,35 @@ def test_the_constant_target_script_runs_the_environments_loop(monkeypatch):
     ]  # fmt: skip
     assert stb.main(["--target", "3", "--thresholds", "default"]) == 0
     assert seen[-1][0].loop.cfg == WSPConfig()
+
+
+def test_a_loop_built_without_thresholds_takes_its_cores_tier():
+    """``SlipTargetLoop()`` (so ``SlipTargetPolicy(t)``) runs on the frozen thresholds of the
+    tier of the core it binds to, as the environment's mode does (before 2026-11-28 it ran on
+    ``WSPConfig()``'s defaults, which differ from both tiers'); thresholds given are kept. A
+    default-built constant target on the accelerometer tier is the mode's stop, bit for bit."""
+    accel, wheels = load_wsp_config(tier="wheels+accel"), load_wsp_config(tier="wheels")
+    assert len({accel, wheels, WSPConfig()}) == 3  # else this proves little
+    for accelerometer, want in ((True, accel), (False, wheels)):
+        loop = SlipTargetLoop()
+        loop.bind(make_core(2, accelerometer=accelerometer))
+        assert loop.cfg == want
+        given = SlipTargetLoop(WSPConfig())
+        given.bind(make_core(2, accelerometer=accelerometer))
+        assert given.cfg == WSPConfig()
+    options = {**SOAP, "speed_kmh": 50.0}
+    env = WSPBrakingEnv(action_mode="slip_target", accelerometer=True)
+    ref = WSPBrakingEnv(accelerometer=True)
+    env.reset(seed=2, options=options)
+    ref_obs, _ = ref.reset(seed=2, options=options)
+    policy = SlipTargetPolicy(MIDDLE_KMH)
+    policy.bind(ref.core)
+    policy.reset(np.arange(1))
+    a = np.zeros(4, dtype=np.float32)
+    while True:
+        _, _, term, trunc, info = env.step(a)
+        ref_obs, _, ref_term, ref_trunc, ref_info = ref.step(policy.act(ref_obs[None])[0])
+        assert (term, trunc) == (ref_term, ref_trunc)
+        if term or trunc:
+            break
+    assert term and info["metrics"] == ref_info["metrics"]
