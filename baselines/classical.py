@@ -93,6 +93,13 @@ def load_wsp_config(path: str | Path | None = None, tier: str = "wheels") -> WSP
         raise ConfigError(f"{p}: {err}") from None
 
 
+def core_tier(core: Any) -> str:
+    """The sensor tier whose frozen thresholds a controller built without its own runs on, for
+    the core it binds to: ``wheels+accel`` with an accelerometer, else ``wheels`` (as
+    ``envs.make_core`` picks them for the residual and slip-target modes)."""
+    return "wheels+accel" if getattr(core, "accelerometer", False) else "wheels"
+
+
 class ArrayState:
     """``state_dict`` / ``load_state_dict`` for a batched controller whose evolving state is
     its numpy arrays: every array attribute except those named in ``_CONSTANT`` (bound once)."""
@@ -179,16 +186,22 @@ class PeriodicRelease:
 
 
 class ClassicalWSP(ArrayState, PeriodicRelease):
-    """The classical WSP as a batched policy (see the module docstring)."""
+    """The classical WSP as a batched policy (see the module docstring). ``config``: its
+    thresholds; None: the frozen file of the sensor tier of the core it binds to
+    (``core_tier``), as the benchmark's classical WSP of that tier (before 2026-11-28,
+    ``WSPConfig()``'s defaults)."""
 
     name = "classical"
     privileged = False
 
     def __init__(self, config: WSPConfig | None = None) -> None:
+        self.config_given = config  # None: the bound core's tier's thresholds (``bind``)
         self.cfg = config or WSPConfig()
 
     def bind(self, core: Any) -> None:
         n, na = core.n_envs, core.n_axles
+        if self.config_given is None:
+            self.cfg = load_wsp_config(tier=core_tier(core))
         self.n_axles = na
         self.dt = core.sim.control_period_s
         self.v_scale = core.obs_par[K.OP_SPEED_SCALE]

@@ -85,7 +85,13 @@ from typing import Any
 
 import numpy as np
 
-from wsp_env.baselines.classical import ArrayState, PeriodicRelease, WSPConfig, load_wsp_config
+from wsp_env.baselines.classical import (
+    ArrayState,
+    PeriodicRelease,
+    WSPConfig,
+    core_tier,
+    load_wsp_config,
+)
 from wsp_env.core import kernel as K
 from wsp_env.core.config import ConfigError, check_number
 
@@ -127,9 +133,9 @@ def check_release(release: Any) -> str:
 class SlipTargetLoop(ArrayState, PeriodicRelease):
     """Valve commands that track per-valve target sliding speeds (module docstring). ``wsp``:
     the classical WSP's thresholds it reuses (recovery, minimum speed, periodic release); None:
-    the frozen file of the sensor tier of the core it binds to (``load_wsp_config``: with an
-    accelerometer ``wheels+accel``'s, else ``wheels``'), the thresholds the environment's mode
-    runs on (``envs.make_core``), so a loop built without them is that mode's loop (before
+    the frozen file of the sensor tier of the core it binds to (``classical.core_tier``: with
+    an accelerometer ``wheels+accel``'s, else ``wheels``'), the thresholds the environment's
+    mode runs on (``envs.make_core``), so a loop built without them is that mode's loop (before
     2026-11-28 it took ``WSPConfig()``'s defaults); ``release``: when a
     periodic release may begin (``RELEASE_GATES``): ``"working"``, only while the loop works
     (some axle's request was under the full demand in the last period, or a wheel's measured
@@ -160,8 +166,7 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         """Attach to a ``BrakingCore``: its scales, valve map and batch size."""
         n, na = core.n_envs, core.n_axles
         if self.wsp_given is None:  # the tier's frozen thresholds, as the environment's mode
-            tier = "wheels+accel" if getattr(core, "accelerometer", False) else "wheels"
-            self.cfg = load_wsp_config(tier=tier)
+            self.cfg = load_wsp_config(tier=core_tier(core))
         self.n_axles = na
         self.dt = core.sim.control_period_s
         self.v_scale = core.obs_par[K.OP_SPEED_SCALE]

@@ -21,7 +21,7 @@ import yaml
 from gymnasium.utils.env_checker import check_env
 from test_train import train_config
 
-from wsp_env.baselines.classical import WSPConfig, load_wsp_config
+from wsp_env.baselines.classical import ClassicalWSP, WSPConfig, load_wsp_config
 from wsp_env.baselines.slip_target import MAX_CREEP_FLOOR_KMH, SlipTargetLoop, SlipTargetPolicy
 from wsp_env.cli import main
 from wsp_env.core import kernel as K
@@ -35,6 +35,7 @@ from wsp_env.policy import (
     write_model_metadata,
 )
 from wsp_env.training.config import load_train_config
+from wsp_env.training.imitation import make_teacher
 from wsp_env.training.train import pin_loop_settings
 
 SOAP = {"rail": "soap", "mu_contaminated": 0.07, "speed_kmh": 120.0, "pattern": "uniform"}
@@ -634,19 +635,25 @@ def test_the_constant_target_script_runs_the_environments_loop(monkeypatch):
 
 
 def test_a_loop_built_without_thresholds_takes_its_cores_tier():
-    """``SlipTargetLoop()`` (so ``SlipTargetPolicy(t)``) runs on the frozen thresholds of the
-    tier of the core it binds to, as the environment's mode does (before 2026-11-28 it ran on
+    """``SlipTargetLoop()`` (so ``SlipTargetPolicy(t)``) and ``ClassicalWSP()`` (so the
+    imitation's ``classical`` teacher) run on the frozen thresholds of the tier of the core they
+    bind to, as the environment's modes and the benchmark do (before 2026-11-28 on
     ``WSPConfig()``'s defaults, which differ from both tiers'); thresholds given are kept. A
     default-built constant target on the accelerometer tier is the mode's stop, bit for bit."""
     accel, wheels = load_wsp_config(tier="wheels+accel"), load_wsp_config(tier="wheels")
     assert len({accel, wheels, WSPConfig()}) == 3  # else this proves little
     for accelerometer, want in ((True, accel), (False, wheels)):
-        loop = SlipTargetLoop()
-        loop.bind(make_core(2, accelerometer=accelerometer))
-        assert loop.cfg == want
-        given = SlipTargetLoop(WSPConfig())
-        given.bind(make_core(2, accelerometer=accelerometer))
-        assert given.cfg == WSPConfig()
+        # the slip-target loop, the classical WSP and the imitation's classical teacher alike
+        for built, given in (
+            (SlipTargetLoop(), SlipTargetLoop(WSPConfig())),
+            (ClassicalWSP(), ClassicalWSP(WSPConfig())),
+            (make_teacher("classical"), None),
+        ):
+            built.bind(make_core(2, accelerometer=accelerometer))
+            assert built.cfg == want
+            if given is not None:
+                given.bind(make_core(2, accelerometer=accelerometer))
+                assert given.cfg == WSPConfig()
     options = {**SOAP, "speed_kmh": 50.0}
     env = WSPBrakingEnv(action_mode="slip_target", accelerometer=True)
     ref = WSPBrakingEnv(accelerometer=True)

@@ -89,9 +89,9 @@ def make_teacher(name: str, targets_kmh: dict[str, float] | None = None) -> Any:
         from wsp_env.baselines.oracle import SlipTargetTeacher
 
         return SlipTargetTeacher(targets_kmh)
-    from wsp_env.baselines.classical import ClassicalWSP, load_wsp_config
+    from wsp_env.baselines.classical import ClassicalWSP
 
-    return ClassicalWSP(load_wsp_config())
+    return ClassicalWSP()  # the learner's tier's frozen thresholds, taken at ``bind``
 
 
 def pretrain(model: Any, env: Any, core: Any, cfg: PretrainConfig, gamma: float) -> dict[str, Any]:
