@@ -399,7 +399,9 @@ def test_the_creep_cap_reaches_the_loop_from_every_entry_point():
     assert single.core.loop.max_creep == 0.3
     train = configs_root() / "train"
     for name, cap in (("ppo_bc_slip_target_accel_uic_z1", 0.0),
-                      ("ppo_bc_slip_target_capped_accel_uic_z1", 0.2)):  # fmt: skip
+                      ("ppo_bc_slip_target_capped_accel_uic_z1", 0.2),
+                      ("ppo_bc_slip_target_capped_uic_z1", 0.2),
+                      ("ppo_bc_slip_target_capped_accel_regiolis", 0.2)):  # fmt: skip
         kw = load_train_config(str(train / f"{name}.yaml")).env_kwargs
         assert WSPBrakingVectorEnv(num_envs=1, **kw).core.loop.max_creep == cap, name
 
