@@ -93,11 +93,17 @@ def load_wsp_config(path: str | Path | None = None, tier: str = "wheels") -> WSP
         raise ConfigError(f"{p}: {err}") from None
 
 
+def accelerometer_tier(accelerometer: bool) -> str:
+    """The benchmark's sensor tier of a sensor set (``TIER_CONFIGS``' keys): ``wheels+accel``
+    with an accelerometer, else ``wheels``. The one mapping every module uses."""
+    return "wheels+accel" if accelerometer else "wheels"
+
+
 def core_tier(core: Any) -> str:
     """The sensor tier whose frozen thresholds a controller built without its own runs on, for
-    the core it binds to: ``wheels+accel`` with an accelerometer, else ``wheels`` (as
-    ``envs.make_core`` picks them for the residual and slip-target modes)."""
-    return "wheels+accel" if getattr(core, "accelerometer", False) else "wheels"
+    the core it binds to (``accelerometer_tier`` of its sensors; as ``envs.make_core`` picks
+    them for the residual and slip-target modes)."""
+    return accelerometer_tier(bool(getattr(core, "accelerometer", False)))
 
 
 class ArrayState:

@@ -512,7 +512,9 @@ def sensor_tier(policy: Any) -> str | None:
     """The sensor tier a policy was trained in (``wheels`` or ``wheels+accel``, from its
     ``env_kwargs``), or None where it does not say (the built-in controllers run in any)."""
     accel = (getattr(policy, "env_kwargs", None) or {}).get("accelerometer")
-    return None if accel is None else ("wheels+accel" if accel else "wheels")
+    from wsp_env.baselines.classical import accelerometer_tier
+
+    return None if accel is None else accelerometer_tier(bool(accel))
 
 
 def check_sensor_tier(policy: Any, tier: str) -> None:

@@ -235,7 +235,9 @@ def cmd_simulate(args: argparse.Namespace) -> dict[str, Any]:
             f"--dt-s: must divide the {control_period_s} s control period, got {args.dt_s:g}"
         )
     rail = load_rail(args.rail, args.rails_config)  # a bad table or rail fails here, named
-    tier = "wheels+accel" if args.accelerometer else "wheels"
+    from wsp_env.baselines.classical import accelerometer_tier
+
+    tier = accelerometer_tier(bool(args.accelerometer))
     (policy,) = _policies([args.policy], args.wsp_config, tier)
     from wsp_env.policy import check_sensor_tier, sensor_tier
 
@@ -271,7 +273,7 @@ def cmd_simulate(args: argparse.Namespace) -> dict[str, Any]:
         "vehicle": vehicle.id,
         "rail": args.rail,
         "policy": policy.name,
-        "tier": "wheels+accel" if accelerometer else "wheels",
+        "tier": accelerometer_tier(bool(accelerometer)),
         "seed": args.seed,
         "mu_contaminated": conditions["mu_contaminated"],
         "pattern_sections": conditions["sections"],

@@ -357,9 +357,9 @@ def make_core(n_envs: int, **kwargs: Any) -> BrakingCore:
     max_creep = check_max_creep(kwargs.pop("slip_target_max_creep", DEFAULT_MAX_CREEP))
     mode = kwargs.get("action_mode")
     if mode in ("residual", "slip_target"):
-        from wsp_env.baselines.classical import ClassicalWSP, load_wsp_config
+        from wsp_env.baselines.classical import ClassicalWSP, accelerometer_tier, load_wsp_config
 
-        tier = "wheels+accel" if kwargs.get("accelerometer") else "wheels"
+        tier = accelerometer_tier(bool(kwargs.get("accelerometer")))
         if mode == "residual":
             kwargs.setdefault("residual_base", ClassicalWSP(load_wsp_config(tier=tier)))
         else:
@@ -731,7 +731,7 @@ class WSPBrakingVectorEnv(VectorEnv):
     def _stagger(self, rng: np.random.Generator, options: list[dict[str, Any] | None]) -> None:
         """``stagger_reset_steps``: advance environment ``i`` ``k_i`` steps into a stop
         (class docstring), driven period by period by the tier's classical WSP."""
-        from wsp_env.baselines.classical import ClassicalWSP, load_wsp_config
+        from wsp_env.baselines.classical import ClassicalWSP, core_tier, load_wsp_config
 
         core, n = self.core, self.num_envs
         offsets = rng.integers(0, self.stagger_reset_steps, size=n)
@@ -739,7 +739,7 @@ class WSPBrakingVectorEnv(VectorEnv):
         start_at = total - offsets  # the warm-up step at which environment i starts anew
         driver = None
         if core.action_mode in ("continuous", "discrete"):
-            tier = "wheels+accel" if core.accelerometer else "wheels"
+            tier = core_tier(core)
             driver = ClassicalWSP(load_wsp_config(tier=tier))
             driver.bind(core)
             driver.reset(np.arange(n))

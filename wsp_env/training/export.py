@@ -141,7 +141,9 @@ def input_spec(policy: SB3Policy) -> dict[str, Any]:
         kwargs["vehicle"] = policy.vehicle
     core = make_core(1, **kwargs)
     par, env_par, axle_par = core.obs_par, core.sim.env_par[0], core.sim.axle_par[0]
-    tier = "wheels+accel" if core.accelerometer else "wheels"
+    from wsp_env.baselines.classical import core_tier
+
+    tier = core_tier(core)
     period = float(core.sim.control_period_s)
     spec: dict[str, Any] = {
         "vehicle": core.vehicle.id,
