@@ -103,7 +103,7 @@ def core_tier(core: Any) -> str:
     """The sensor tier whose frozen thresholds a controller built without its own runs on, for
     the core it binds to (``accelerometer_tier`` of its sensors; as ``envs.make_core`` picks
     them for the residual and slip-target modes)."""
-    return accelerometer_tier(bool(getattr(core, "accelerometer", False)))
+    return accelerometer_tier(bool(core.accelerometer))
 
 
 class ArrayState:

@@ -672,3 +672,15 @@ def test_a_loop_built_without_thresholds_takes_its_cores_tier():
         if term or trunc:
             break
     assert term and info["metrics"] == ref_info["metrics"]
+    # the control: the defaults' loop makes another stop of it (122.3 m against 124.5 m)
+    other = WSPBrakingEnv(accelerometer=True)
+    obs, _ = other.reset(seed=2, options=options)
+    policy = SlipTargetPolicy(MIDDLE_KMH, SlipTargetLoop(WSPConfig()))
+    policy.bind(other.core)
+    policy.reset(np.arange(1))
+    while True:
+        obs, _, term, trunc, control = other.step(policy.act(obs[None])[0])
+        if term or trunc:
+            break
+    distance = "stopping_distance_m"
+    assert abs(control["metrics"][distance] - info["metrics"][distance]) > 1.0
