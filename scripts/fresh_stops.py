@@ -1,0 +1,145 @@
+"""Policies on fresh stops of one rail from the benchmark's distribution, for rates its 300-stop
+sets cannot resolve (a watchdog stop on 1 % of the leaves stops is 0-2 of a set's ~74).
+
+The stops are those whose rail is ``--rail`` among the seeds ``FRESH_SEED_BASE + i``,
+``i < --draw`` (9,800,000 + i: no sealed, development, fine-tune pool or suite stop), drawn
+with the benchmark's scenario, sensors and watchdog of ``--vehicle`` and ``--tier``
+(``benchmark_env_kwargs``), every policy on the same stops through the benchmark's runner. Per
+policy: the stops with a watchdog intervention, the longest lock and its stop, and the stops
+not stopped in the time limit. ``--policy`` is ``classical`` (the tier's frozen classical WSP),
+``target:X`` (a constant X km/h target on the slip-target loop of the tier, the environment's
+default loop) or anything ``wsp-env benchmark --policy`` takes (a model file, a shipped
+policy's name). ``--json`` keeps every run (written whole or not at all).
+
+    .venv/bin/python scripts/fresh_stops.py --rail leaves --draw 1200 \\
+        --policy runs/train/bc_st_cap2_s1/student.zip --policy target:2 --policy classical \\
+        --json runs/s17/leaves.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+from pathlib import Path
+from typing import Any
+
+from wsp_env.baselines.slip_target import SlipTargetPolicy
+from wsp_env.core.config import load_vehicle
+from wsp_env.envs import make_core
+from wsp_env.envs.tiers import TIERS, VERSION, benchmark_env_kwargs
+from wsp_env.evaluation.benchmark import DAMAGE_CRITERIA, POLICY_KEYS
+from wsp_env.evaluation.runner import run_runs
+from wsp_env.evaluation.suites import Run
+from wsp_env.policy import make_policy
+
+FRESH_SEED_BASE = 9_800_000  # above the fine-tune pool's 9,510,000 + i, i < 100,000
+MAX_DRAW = 100_000
+
+
+def rail_seeds(vehicle: str, tier: str, rail: str, draw: int) -> list[int]:
+    """The seeds among ``FRESH_SEED_BASE + i``, ``i < draw``, whose stop is on ``rail``: each
+    stop's scenario drawn as the runner draws it, without running it."""
+    kw = benchmark_env_kwargs(vehicle, tier, VERSION)
+    veh = load_vehicle(kw.pop("vehicle"))
+    seeds = [FRESH_SEED_BASE + i for i in range(draw)]
+    core = make_core(len(seeds), vehicle=veh, **kw)
+    found = []
+    for e, seed in enumerate(seeds):
+        core.reset_env(e, {}, seed=seed)
+        if core.sim.setups[e].rail_name == rail:
+            found.append(seed)
+    return found
+
+
+def build_policy(spec: str, tier: str) -> Any:
+    """``target:X`` as a constant target on the tier's default loop; anything else as ``wsp-env
+    benchmark --policy`` builds it."""
+    if spec.startswith("target:"):
+        try:
+            kmh = float(spec.split(":", 1)[1])
+        except ValueError:
+            raise ValueError(f"--policy {spec}: target:X needs a number of km/h") from None
+        if not 0.0 <= kmh <= 30.0:
+            raise ValueError(f"--policy {spec}: a target in [0, 30] km/h")
+        return SlipTargetPolicy(kmh)  # the bound core's tier's loop
+    return make_policy(spec, tier=tier)
+
+
+def run(vehicle: str, tier: str, seeds: list[int], specs: list[str]) -> dict[str, list[dict]]:
+    """Every policy on the stops of ``seeds``: each policy's run results, keyed by its spec."""
+    kw = benchmark_env_kwargs(vehicle, tier, VERSION)
+    veh = load_vehicle(kw.pop("vehicle"))
+    max_time_s = kw.pop("max_time_s")
+    runs = [Run(f"fresh_{s}", s, {}, dict(DAMAGE_CRITERIA), veh) for s in seeds]
+    out = {}
+    for spec in specs:
+        policy = build_policy(spec, tier)
+        res, _ = run_runs(veh, runs, policy, max_time_s=max_time_s, env_kwargs=kw,
+                          policy_keys=POLICY_KEYS)  # fmt: skip
+        out[spec] = res
+    return out
+
+
+def summary(results: list[dict]) -> dict[str, Any]:
+    """A policy's watchdog stops, longest lock (and its stop) and stops not stopped."""
+    longest = max(results, key=lambda r: r["max_lock_s"])
+    return {
+        "stops": len(results),
+        "watchdog_stops": [r["scenario"] for r in results if r["watchdog"]["total"] > 0],
+        "longest_lock_s": float(longest["max_lock_s"]),
+        "longest_lock_stop": longest["scenario"],
+        "not_stopped": [r["scenario"] for r in results if not r["stopped"]],
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--rail", required=True, help="the rail of the stops kept")
+    ap.add_argument("--draw", type=int, default=1200, help="seeds drawn (default 1200)")
+    ap.add_argument("--policy", action="append", required=True, help="repeatable")
+    ap.add_argument("--vehicle", default="uic_z1")
+    ap.add_argument("--tier", default="wheels+accel", choices=list(TIERS))
+    ap.add_argument("--json", dest="json_path", help="write every run here")
+    args = ap.parse_args(argv)
+    try:
+        if not 1 <= args.draw <= MAX_DRAW:
+            raise ValueError(f"--draw: must be 1-{MAX_DRAW}, got {args.draw}")
+        rails = benchmark_env_kwargs(args.vehicle, args.tier, VERSION)["scenario"]["rails"]
+        if args.rail not in rails:
+            raise ValueError(f"--rail: {args.rail!r} is not one of {', '.join(rails)}")
+        for spec in args.policy:  # every policy checked before any stop runs
+            build_policy(spec, args.tier)
+        seeds = rail_seeds(args.vehicle, args.tier, args.rail, args.draw)
+        if not seeds:
+            raise ValueError(f"--draw: no {args.rail} stop among {args.draw} seeds")
+        results = run(args.vehicle, args.tier, seeds, args.policy)
+    except (OSError, ValueError, KeyError) as err:
+        msg = str(err) if isinstance(err, ValueError) else f"{type(err).__name__}: {err}"
+        print(f"fresh_stops: {msg}", file=sys.stderr)
+        return 2
+    last = FRESH_SEED_BASE + args.draw - 1
+    print(f"{len(seeds)} {args.rail} stops among seeds {FRESH_SEED_BASE}-{last} "
+          f"({args.vehicle}, {args.tier}, {VERSION})")  # fmt: skip
+    sums = {spec: summary(res) for spec, res in results.items()}
+    for spec, s in sums.items():
+        wd = s["watchdog_stops"]
+        print(f"{spec}: watchdog on {len(wd)} ({', '.join(wd[:8])}{' ...' if len(wd) > 8 else ''}"
+              f"), longest lock {s['longest_lock_s']:.2f} s ({s['longest_lock_stop']}), "
+              f"not stopped {len(s['not_stopped'])}")  # fmt: skip
+    if args.json_path:
+        path = Path(args.json_path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(path.name + ".tmp")
+        payload = {
+            "vehicle": args.vehicle, "tier": args.tier, "version": VERSION, "rail": args.rail,
+            "seeds": seeds, "summary": sums, "run_results": results,
+        }  # fmt: skip
+        tmp.write_text(json.dumps(payload, indent=1, default=float), encoding="utf-8")
+        os.replace(tmp, path)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

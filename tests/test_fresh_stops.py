@@ -1,0 +1,63 @@
+"""scripts/fresh_stops.py: policies on fresh stops of one rail (seeds no set or pool uses)."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "scripts"))
+import fresh_stops
+
+from wsp_env.evaluation.benchmark import SEALED_SEED_BASE, STOP_SETS
+from wsp_env.training.es import MAX_POOL, TRAINING_SEED_BASE
+
+
+def test_the_fresh_seeds_are_no_sets_or_pools():
+    top = fresh_stops.FRESH_SEED_BASE + fresh_stops.MAX_DRAW
+    for base in (SEALED_SEED_BASE, STOP_SETS["development"][0]):
+        assert base + 300 <= fresh_stops.FRESH_SEED_BASE or base >= top
+    assert TRAINING_SEED_BASE + MAX_POOL <= fresh_stops.FRESH_SEED_BASE
+
+
+def test_stops_of_one_rail_run_under_every_policy(tmp_path, capsys):
+    """The kept seeds are exactly the draw's stops on the rail; every policy runs them all, the
+    file holds each run and the summary counts what the runs say."""
+    seeds = fresh_stops.rail_seeds("uic_z1", "wheels+accel", "dry", 30)
+    assert seeds and all(9_800_000 <= s < 9_800_030 for s in seeds)
+    others = set(range(9_800_000, 9_800_030)) - set(seeds)
+    assert others  # other rails were drawn and left out
+    out = tmp_path / "f.json"
+    argv = ["--rail", "dry", "--draw", "30", "--policy", "target:3", "--policy", "classical",
+            "--json", str(out)]  # fmt: skip
+    assert fresh_stops.main(argv) == 0
+    data = json.loads(out.read_text())
+    assert data["seeds"] == seeds and data["rail"] == "dry"
+    for spec in ("target:3", "classical"):
+        runs = data["run_results"][spec]
+        assert [r["seed"] for r in runs] == seeds
+        assert all(r["conditions"]["rail"] == "dry" and r["stopped"] for r in runs)
+        s = data["summary"][spec]
+        assert s["stops"] == len(seeds)
+        assert s["longest_lock_s"] == max(r["max_lock_s"] for r in runs)
+    assert f"{len(seeds)} dry stops among seeds" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(
+    "argv, words",
+    [
+        (["--rail", "mud", "--policy", "classical"], "--rail: 'mud' is not one of"),
+        (["--rail", "dry", "--policy", "target:x"], "target:X needs a number"),
+        (["--rail", "dry", "--policy", "target:40"], "a target in [0, 30] km/h"),
+        (["--rail", "dry", "--draw", "0", "--policy", "classical"], "--draw: must be"),
+        (["--rail", "dry", "--policy", "no_such_model.zip"], "no_such_model.zip"),
+    ],
+)
+def test_bad_input_is_one_line_and_no_file(tmp_path, capsys, argv, words):
+    out = tmp_path / "f.json"
+    assert fresh_stops.main([*argv, "--json", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert words in err and "\n" not in err and err.startswith("fresh_stops: ")
+    assert not out.exists() and not list(tmp_path.iterdir())
