@@ -731,7 +731,7 @@ class WSPBrakingVectorEnv(VectorEnv):
     def _stagger(self, rng: np.random.Generator, options: list[dict[str, Any] | None]) -> None:
         """``stagger_reset_steps``: advance environment ``i`` ``k_i`` steps into a stop
         (class docstring), driven period by period by the tier's classical WSP."""
-        from wsp_env.baselines.classical import ClassicalWSP, core_tier, load_wsp_config
+        from wsp_env.baselines.classical import ClassicalWSP
 
         core, n = self.core, self.num_envs
         offsets = rng.integers(0, self.stagger_reset_steps, size=n)
@@ -739,8 +739,7 @@ class WSPBrakingVectorEnv(VectorEnv):
         start_at = total - offsets  # the warm-up step at which environment i starts anew
         driver = None
         if core.action_mode in ("continuous", "discrete"):
-            tier = core_tier(core)
-            driver = ClassicalWSP(load_wsp_config(tier=tier))
+            driver = ClassicalWSP()  # the core's tier's frozen thresholds, taken at bind
             driver.bind(core)
             driver.reset(np.arange(n))
         for t in range(1, total + 1):
