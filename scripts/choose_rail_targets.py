@@ -48,11 +48,11 @@ from wsp_env.evaluation.benchmark import score
 TARGET = re.compile(r"^slip_target_(\d+(?:\.\d+)?)kmh$")
 
 
-def _keyed(rows: list[dict]) -> dict[tuple, dict]:
+def by_stop(rows: list[dict]) -> dict[tuple, dict]:
     return {(r["scenario"], int(r["seed"])): r for r in rows}
 
 
-def _thresholds(data: dict[str, Any]) -> str:
+def loop_thresholds(data: dict[str, Any]) -> str:
     """Which classical thresholds the file's loop ran on (``slip_target_benchmark.py
     --thresholds``; a file without the record was made before it: ``WSPConfig()``'s
     defaults)."""
@@ -73,16 +73,16 @@ def load(paths: list[str]) -> tuple[dict[str, Any], dict[float, dict[tuple, dict
         runs = data["run_results"]
         if not runs.get("classical") or not runs.get("none"):
             raise ValueError(f"{path}: no classical or no locked-wheel (none) runs")
-        base = _keyed(runs["classical"])
+        base = by_stop(runs["classical"])
         if first:
             for field in ("vehicle", "tier"):
                 if data.get(field) != first.get(field):
                     raise ValueError(f"{path}: {field} {data.get(field)!r}, not "
                                      f"{first.get(field)!r} as {paths[0]}")  # fmt: skip
-            if _thresholds(data) != _thresholds(first):
-                raise ValueError(f"{path}: the loop on {_thresholds(data)} thresholds, not on "
-                                 f"{_thresholds(first)} as {paths[0]}")  # fmt: skip
-            if set(base) != set(_keyed(first["run_results"]["classical"])):
+            if loop_thresholds(data) != loop_thresholds(first):
+                raise ValueError(f"{path}: the loop on {loop_thresholds(data)} thresholds, not on "
+                                 f"{loop_thresholds(first)} as {paths[0]}")  # fmt: skip
+            if set(base) != set(by_stop(first["run_results"]["classical"])):
                 raise ValueError(f"{path}: not the same stops as {paths[0]}")
         else:
             first = data
@@ -92,7 +92,7 @@ def load(paths: list[str]) -> tuple[dict[str, Any], dict[float, dict[tuple, dict
                 continue
             if float(m.group(1)) in targets:
                 raise ValueError(f"{path}: {name} is in an earlier file too")
-            keyed = _keyed(rows)
+            keyed = by_stop(rows)
             if set(keyed) != set(base):
                 raise ValueError(f"{path}: {name} did not run every stop of the classical WSP")
             targets[float(m.group(1))] = keyed
@@ -105,8 +105,8 @@ def teacher(first: dict[str, Any], targets: dict, table: dict[str, float]) -> di
     """The teacher with ``table``, stop by stop from the constant targets' runs: its score
     (``benchmark.score``) and item 6's criteria rows (``ship_criteria.criteria``)."""
     runs = first["run_results"]
-    keys = sorted(_keyed(runs["classical"]))
-    base, none = _keyed(runs["classical"]), _keyed(runs["none"])
+    keys = sorted(by_stop(runs["classical"]))
+    base, none = by_stop(runs["classical"]), by_stop(runs["none"])
     mine = [targets[table[base[k]["conditions"]["rail"]]][k] for k in keys]
     ret = np.array([r["return"] for r in mine])
     result = score(ret, np.array([none[k]["return"] for k in keys]),
@@ -126,8 +126,8 @@ def hindsight(first: dict[str, Any], targets: dict, by: str) -> dict[str, Any]:
     and worst of its per-stop ratios to the classical WSP's stop, its longest lock, and how
     many stops each target won."""
     kmh = sorted(targets)
-    classical = _keyed(first["run_results"]["classical"])
-    none = _keyed(first["run_results"]["none"])
+    classical = by_stop(first["run_results"]["classical"])
+    none = by_stop(first["run_results"]["none"])
     ratios, locks, returns, wins = [], [], [], dict.fromkeys(kmh, 0)
     for k, base in classical.items():
         rows = [targets[t][k] for t in kmh]
@@ -190,7 +190,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     try:
         first, targets = load(args.benchmark_json)
-        table = choose(_keyed(first["run_results"]["classical"]), targets, args.worst)
+        table = choose(by_stop(first["run_results"]["classical"]), targets, args.worst)
         taught = teacher(first, targets, {rail: info["choice"] for rail, info in table.items()})
     except (OSError, ValueError, KeyError, TypeError) as err:
         msg = str(err) if isinstance(err, ValueError) else f"{type(err).__name__}: {err}"

@@ -34,7 +34,7 @@ def load_pairs(paths: list[str]) -> tuple[dict, dict[float, dict], dict[float, t
         data = json.loads(Path(path).read_text(encoding="utf-8"))
         if data.get("stops") != "development":
             raise ValueError(f"{path}: stops {data.get('stops')!r}, not development")
-        if first and crt._thresholds(data) != crt._thresholds(first):
+        if first and crt.loop_thresholds(data) != crt.loop_thresholds(first):
             raise ValueError(f"{path}: the loop on other thresholds than {paths[0]}")
         first = first or data
         for name, rows in data["run_results"].items():
@@ -46,7 +46,7 @@ def load_pairs(paths: list[str]) -> tuple[dict, dict[float, dict], dict[float, t
                 raise ValueError(f"{path}: {name} is in an earlier file too")
             key = float(len(label))
             label[key] = pair
-            targets[key] = crt._keyed(rows)
+            targets[key] = crt.by_stop(rows)
     if not targets:
         raise ValueError("no slip_target_<x>kmh policy in the files")
     return first, targets, label
@@ -58,7 +58,7 @@ def main(argv: list[str] | None = None) -> int:
         if not paths:
             raise ValueError("give development-stop files of slip_target_benchmark.py")
         first, targets, label = load_pairs(paths)
-        table = crt.choose(crt._keyed(first["run_results"]["classical"]), targets, 1.10)
+        table = crt.choose(crt.by_stop(first["run_results"]["classical"]), targets, 1.10)
         taught = crt.teacher(first, targets, {r: info["choice"] for r, info in table.items()})
     except (OSError, ValueError, KeyError) as err:
         msg = str(err) if isinstance(err, ValueError) else f"{type(err).__name__}: {err}"

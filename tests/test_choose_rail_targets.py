@@ -15,7 +15,7 @@ import choose_rail_targets
 RAILS = ["wet", "wet", "leaves", "leaves"]
 
 
-def _runs(distances, returns, locks=(0.0,) * 4, watchdog=()):
+def runs_of(distances, returns, locks=(0.0,) * 4, watchdog=()):
     return [{"scenario": f"s{i}", "seed": i, "stopping_distance_m": d, "return": r,
              "max_lock_s": lk, "watchdog": {"total": int(i in watchdog)},
              "conditions": {"rail": rail}, "sliding_energy_kJ": 10.0, "air_litres": 5.0,
@@ -28,9 +28,9 @@ CLASSICAL = {"sliding_energy_kJ_mean": 20.0, "air_litres_mean": 10.0, "max_lock_
              "max_sliding_kmh_max": 5.0}  # fmt: skip
 
 
-def _write(path, policies, stops="development", vehicle="regiolis", thresholds=None):
-    runs = {"none": _runs([300.0] * 4, [-15.0] * 4),
-            "classical": _runs([100.0] * 4, [-5.0] * 4, locks=(0.0, 0.0, 0.3, 0.1)),
+def bench(path, policies, stops="development", vehicle="regiolis", thresholds=None):
+    runs = {"none": runs_of([300.0] * 4, [-15.0] * 4),
+            "classical": runs_of([100.0] * 4, [-5.0] * 4, locks=(0.0, 0.0, 0.3, 0.1)),
             **policies}  # fmt: skip
     data = {"stops": stops, "vehicle": vehicle, "tier": "wheels+accel",
             "policies": {"classical": CLASSICAL}, "run_results": runs}  # fmt: skip
@@ -41,16 +41,16 @@ def _write(path, policies, stops="development", vehicle="regiolis", thresholds=N
 
 
 def test_the_best_return_within_the_limits_and_limits_dropped_last_first(tmp_path, capsys):
-    a = _write(tmp_path / "a.json", {
+    a = bench(tmp_path / "a.json", {
         # wet: 8 km/h returns most but locks 1 s (over the classical WSP's 0.3): 4 is chosen
         # leaves: 2 km/h brings the watchdog; 3 returns most, a stop 1.2x; 4 meets every limit
-        "slip_target_2kmh": _runs([90.0, 90.0, 50.0, 50.0], [-4.5, -4.5, -1.0, -1.0],
+        "slip_target_2kmh": runs_of([90.0, 90.0, 50.0, 50.0], [-4.5, -4.5, -1.0, -1.0],
                                   watchdog=(2,)),
-        "slip_target_3kmh": _runs([95.0, 95.0, 120.0, 60.0], [-4.6, -4.6, -2.0, -2.0]),
-        "slip_target_4kmh": _runs([96.0, 96.0, 90.0, 90.0], [-4.4, -4.4, -3.0, -3.0]),
+        "slip_target_3kmh": runs_of([95.0, 95.0, 120.0, 60.0], [-4.6, -4.6, -2.0, -2.0]),
+        "slip_target_4kmh": runs_of([96.0, 96.0, 90.0, 90.0], [-4.4, -4.4, -3.0, -3.0]),
     })  # fmt: skip
-    b = _write(tmp_path / "b.json", {
-        "slip_target_8kmh": _runs([90.0, 90.0, 99.0, 99.0], [-4.0, -4.0, -4.0, -4.0],
+    b = bench(tmp_path / "b.json", {
+        "slip_target_8kmh": runs_of([90.0, 90.0, 99.0, 99.0], [-4.0, -4.0, -4.0, -4.0],
                                   locks=(1.0, 0.0, 0.0, 0.0)),
     })  # fmt: skip
     assert choose_rail_targets.main([a, b]) == 0
@@ -84,21 +84,21 @@ def test_the_best_return_within_the_limits_and_limits_dropped_last_first(tmp_pat
 
 
 def test_a_sealed_file_or_other_stops_are_refused_in_one_line(tmp_path, capsys):
-    sealed = _write(tmp_path / "s.json", {"slip_target_2kmh": _runs([90.0] * 4, [-4.0] * 4)},
+    sealed = bench(tmp_path / "s.json", {"slip_target_2kmh": runs_of([90.0] * 4, [-4.0] * 4)},
                     stops="sealed")  # fmt: skip
     assert choose_rail_targets.main([sealed]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "not development" in err
-    none = _write(tmp_path / "n.json", {})
+    none = bench(tmp_path / "n.json", {})
     assert choose_rail_targets.main([none]) == 2
     assert "no slip_target_<x>kmh policy" in capsys.readouterr().err
     # files of two vehicles, a target in two files, a target short of a stop
-    one = _write(tmp_path / "1.json", {"slip_target_2kmh": _runs([90.0] * 4, [-4.0] * 4)})
-    other = _write(tmp_path / "2.json", {"slip_target_3kmh": _runs([90.0] * 4, [-4.0] * 4)},
+    one = bench(tmp_path / "1.json", {"slip_target_2kmh": runs_of([90.0] * 4, [-4.0] * 4)})
+    other = bench(tmp_path / "2.json", {"slip_target_3kmh": runs_of([90.0] * 4, [-4.0] * 4)},
                    vehicle="uic_z1")  # fmt: skip
-    short = _write(tmp_path / "3.json", {"slip_target_4kmh": _runs([90.0] * 4, [-4.0] * 4)[:3]})
+    short = bench(tmp_path / "3.json", {"slip_target_4kmh": runs_of([90.0] * 4, [-4.0] * 4)[:3]})
     # a file of the loop on the tier's thresholds and one made before they were recorded
-    tier = _write(tmp_path / "4.json", {"slip_target_5kmh": _runs([90.0] * 4, [-4.0] * 4)},
+    tier = bench(tmp_path / "4.json", {"slip_target_5kmh": runs_of([90.0] * 4, [-4.0] * 4)},
                   thresholds="tier")  # fmt: skip
     for files, says in (([one, other], "vehicle 'uic_z1', not 'regiolis'"),
                         ([one, tier], "the loop on tier thresholds, not on default"),
