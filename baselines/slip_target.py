@@ -68,7 +68,22 @@ what the sensor model measures) — exactly as the classical WSP (``classical.py
   onset, and the estimator then counts the age until an anchor), and an ungated release
   (``release="always"``, the loop before 2026-11-27) vented one axle after another of a train
   whose wheels all gripped (a wet Régiolis stop at 3 km/h: three axles, 97.3 m against 95.9 m);
-* a valve of several axles (bogie valves) asks for its most cautious axle's request.
+* a valve of several axles (bogie valves) asks for its most cautious axle's request;
+* **the reference's drift, corrected** (``drift_correction``; the ``wheels+accel`` tier's aided
+  reference only; off by default): the shared estimator dead-reckons on the accelerometer and
+  learns the reading's offset (bias and the gradient a specific-force sensor reads) only at an
+  anchor at least ``kernel.ACC_LEARN_MIN_SPAN_S`` (2 s) after the last, and then
+  ``accel_offset_gain`` (half) of it. A loop holding a low target can keep it from ever
+  learning: on an uphill leaves stop (+21 per mille, bias -0.12 m/s^2) the reference rose above
+  the train at 1.3 km/h a second, a 1 km/h target read as reached with every wheel gripping, the
+  loop vented every axle, every wheel rolled free, the estimator anchored about 1 s later — too
+  soon to learn — and the cycle repeated all stop (the train braked about half the time; 1.84x
+  the classical WSP's distance). With the correction the loop reads each anchor's jump of the
+  reference (what it drifted since the last anchor, a rate over the time between them), takes
+  away the share the estimator learned at that anchor, and subtracts the rest times the time
+  since the anchor from the reference it tracks (never below the fastest wheel): a constant
+  offset is corrected from the first anchor on, whether the estimator learned at it or not.
+  ``docs/training.md``, "The slip-target loop's drift correction".
 
 The commands are continuous valve actions (``2 f - 1``), so the loop can drive any continuous
 environment from outside (``SlipTargetPolicy``: a constant target) and gives, bit for bit, the
@@ -101,6 +116,9 @@ RELEASE_GATES = ("working", "always")
 # written before each existed gets
 DEFAULT_RELEASE = "working"
 DEFAULT_MAX_CREEP = 0.2
+DEFAULT_DRIFT_CORRECTION = False
+# the drift correction reads a rate from an anchor's jump only over at least this long (s)
+DRIFT_MIN_SPAN_S = 0.5
 # the creep cap never asks for less than this (km/h of measured slip; a lower target is kept)
 MAX_CREEP_FLOOR_KMH = 2.0
 
@@ -118,6 +136,17 @@ def check_max_creep(max_creep: Any) -> float:
     cap), or a one-line ``ConfigError`` naming the environment argument
     ``slip_target_max_creep``."""
     return check_number(max_creep, "slip_target_max_creep", ge=0.0, le=1.0)
+
+
+def check_drift_correction(drift_correction: Any) -> bool:
+    """The drift correction's switch as a bool, or a one-line ``ConfigError`` naming the
+    environment argument ``slip_target_drift_correction`` (true or false; a number or a
+    string is refused, not read as true)."""
+    if not isinstance(drift_correction, (bool, np.bool_)):
+        raise ConfigError(
+            f"slip_target_drift_correction: must be true or false, got {drift_correction!r}"
+        )
+    return bool(drift_correction)
 
 
 def check_release(release: Any) -> str:
@@ -143,7 +172,9 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
     classical WSP only while it is active;
     ``"always"``, whenever the reference's age allows (the loop before 2026-11-27);
     ``max_creep``: each target at most this fraction of the reference speed (0: no cap, the loop
-    before the cap)."""
+    before the cap); ``drift_correction``: track the slip against the estimator's reference less
+    the drift its last anchor showed and it has not learned (module docstring; needs the
+    accelerometer: ``bind`` refuses a core without one)."""
 
     name = "slip_target_loop"
     privileged = False
@@ -155,12 +186,14 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         lead_s: float = 0.1,
         release: str = DEFAULT_RELEASE,
         max_creep: float = DEFAULT_MAX_CREEP,
+        drift_correction: bool = DEFAULT_DRIFT_CORRECTION,
     ) -> None:
         self.wsp_given = wsp  # None: the bound core's tier's thresholds (``bind``)
         self.cfg = wsp or WSPConfig()
         self.gain_per_kmh, self.lead_s = check_loop_args(gain_per_kmh, lead_s)
         self.release = check_release(release)
         self.max_creep = check_max_creep(max_creep)
+        self.drift_correction = check_drift_correction(drift_correction)
 
     def bind(self, core: Any) -> None:
         """Attach to a ``BrakingCore``: its scales, valve map and batch size."""
@@ -192,6 +225,21 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         self.prev_ref = np.full(n, np.nan)
         self.prev_age = np.zeros(n)
         self._rows = np.arange(n)
+        # the drift correction (``drift_correction``): the estimator's share of an offset it
+        # learns at an anchor; the reference the loop tracks (m/s), the estimator's a period
+        # before and its fall (m/s^2), the time since the last anchor (s) and the drift taken
+        # away (m/s a second)
+        if self.drift_correction and not getattr(core, "accelerometer", False):
+            raise ConfigError(
+                "slip_target_drift_correction: needs the accelerometer (the wheels+accel tier): "
+                "it corrects the aided reference's drift"
+            )
+        self.learn_gain = float(core.obs_par[K.OP_ACC_OFFSET_GAIN])
+        self.v_ref = np.zeros(n)
+        self.raw_ref = np.full(n, np.nan)
+        self.raw_decel = np.zeros(n)
+        self.since_anchor = np.zeros(n)
+        self.drift = np.zeros(n)
 
     def reset(self, env_ids: np.ndarray) -> None:
         """Environments ``env_ids`` start a new stop."""
@@ -201,9 +249,41 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         self.decel_ref[env_ids] = 0.0
         self.prev_ref[env_ids] = np.nan
         self.prev_age[env_ids] = 0.0
+        self.raw_ref[env_ids] = np.nan
+        self.raw_decel[env_ids] = 0.0
+        self.since_anchor[env_ids] = 0.0
+        self.drift[env_ids] = 0.0
 
     # bound once (``bind``); every other array evolves (``state_dict``)
     _CONSTANT = frozenset({"valve_of_axle", "valve_starts", "_rows"})  # and ref_limit, a float
+
+    def _correct_drift(self, v_ref: np.ndarray, age: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """The reference the loop tracks (m/s): the estimator's ``v_ref`` less the drift its last
+        anchor showed and it did not learn, times the time since that anchor (module
+        docstring), never below the fastest wheel (or ``v_ref``, where that is lower); advances
+        the correction's state. An anchor is the reference's age falling; its jump (the
+        estimator's reference a period before, less its fall over the period before that, less
+        now) is what the
+        reference drifted since the anchor before (the stop's start before the first): the
+        estimator's own span, over which it learned ``learn_gain`` of it if at least
+        ``ACC_LEARN_MIN_SPAN_S`` long."""
+        dt = self.dt
+        anchored = (age < self.prev_age - 1e-9) & np.isfinite(self.raw_ref)
+        span = np.maximum(self.since_anchor, dt)  # the estimator's time since its last anchor
+        jump = self.raw_ref - self.raw_decel * dt - v_ref
+        learned = np.where(span >= K.ACC_LEARN_MIN_SPAN_S - 1e-9, self.learn_gain, 0.0)
+        rate = np.clip((1.0 - learned) * jump / span, -K.ACC_CORR_MAX, K.ACC_CORR_MAX)
+        # a jump over a short span is mostly the wheels' noise and scale errors over it: kept
+        self.drift = np.where(anchored & (span >= DRIFT_MIN_SPAN_S - 1e-9), rate, self.drift)
+        since = np.where(anchored, 0.0, self.since_anchor)
+        self.since_anchor = since + dt  # at the next period's observation
+        # the estimator's reference's own fall a second, kept through an anchor
+        self.raw_decel = np.where(
+            anchored | ~np.isfinite(self.raw_ref), self.raw_decel, (self.raw_ref - v_ref) / dt
+        )
+        self.raw_ref = v_ref.copy()
+        corrected = v_ref - self.drift * since
+        return np.maximum(corrected, np.minimum(v.max(axis=1), v_ref))
 
     def advance(self, obs: np.ndarray) -> None:
         """One control period of the loop's state on the kernel's observation ``obs``
@@ -216,6 +296,10 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         # the reference jumped to a wheel, up or down, which is no deceleration of the train)
         # and within [0, the estimator's limit] (what a braking train does)
         v_ref = obs[:, 4 * na + 1].astype(np.float64) * self.v_scale
+        v = obs[:, :na].astype(np.float64) * self.v_scale
+        if self.drift_correction:  # the reference the loop tracks (``_correct_drift``)
+            v_ref = self._correct_drift(v_ref, age, v)
+            self.v_ref = v_ref
         slope = (self.prev_ref - v_ref) / dt
         known = np.isfinite(slope) & (age >= self.prev_age)
         self.decel_ref = np.where(known, np.clip(slope, 0.0, self.ref_limit), self.decel_ref)
@@ -224,7 +308,6 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         allowed = None
         if self.release == "working":  # the loop works: it asked for under the demand in the
             # last period, or a wheel slips beyond the estimator's working band now
-            v = obs[:, :na].astype(np.float64) * self.v_scale
             band = np.maximum(self.active_slip, self.active_slip_rel * v_ref)
             allowed = self.working | ((v_ref[:, None] - v) > band[:, None]).any(axis=1)
         rows, axles = self._release_step(age, decel, dt, allowed)
@@ -242,7 +325,11 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         decel = obs[:, na : 2 * na].astype(np.float64) * self.a_scale
         pressure = obs[:, 3 * na : 4 * na].astype(np.float64)  # / p_max
         demand = obs[:, 4 * na].astype(np.float64)[:, None]  # / p_max
-        v_ref = obs[:, 4 * na + 1].astype(np.float64)[:, None] * self.v_scale
+        # the estimator's reference, or with ``drift_correction`` the corrected one (``advance``)
+        if self.drift_correction:
+            v_ref = self.v_ref[:, None]
+        else:
+            v_ref = obs[:, 4 * na + 1].astype(np.float64)[:, None] * self.v_scale
         # the measured slip a lead ahead: its rate is the wheel's deceleration less the
         # reference's (``advance``), so a slip held on target has no lead term
         slip_ahead = (v_ref - v) + self.lead_s * (decel - self.decel_ref[:, None])  # m/s
@@ -269,9 +356,11 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
 
 def loop_suffix(loop: SlipTargetLoop) -> str:
     """What a policy's name adds for a loop whose settings are not the defaults:
-    ``_<release>`` for the gate, ``_creep<x>`` for the cap (``""`` for the default loop)."""
+    ``_<release>`` for the gate, ``_creep<x>`` for the cap, ``_drift`` for the drift correction
+    (``""`` for the default loop)."""
     gate = "" if loop.release == DEFAULT_RELEASE else f"_{loop.release}"
-    return gate + ("" if loop.max_creep == DEFAULT_MAX_CREEP else f"_creep{loop.max_creep:g}")
+    cap = "" if loop.max_creep == DEFAULT_MAX_CREEP else f"_creep{loop.max_creep:g}"
+    return gate + cap + ("_drift" if loop.drift_correction else "")
 
 
 class SlipTargetPolicy:

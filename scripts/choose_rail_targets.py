@@ -24,8 +24,10 @@ Reads only the targets named ``slip_target_<x>kmh``: the environment's default l
 file was made (gated and capped since 2026-11-27; a file made before the gate named its ungated
 runs so, one made between the gate and the creep cap its uncapped runs; a loop other than the
 default is named in the policy's name, ``slip_target_<x>kmh_always``, ``..._creep0``, and
-skipped). Files whose loops ran on different classical thresholds (``slip_target_loop``: the
-tier's since 2026-11-27, ``WSPConfig()``'s defaults before) are not merged.
+skipped; ``--loop drift`` reads the targets of the loop with the drift correction,
+``slip_target_<x>kmh_drift``, instead, and skips the default loop's). Files whose loops ran
+on different classical thresholds (``slip_target_loop``: the tier's since 2026-11-27,
+``WSPConfig()``'s defaults before) are not merged.
 
     .venv/bin/python scripts/choose_rail_targets.py runs/s14/regiolis_targets_dev.json \\
         [runs/s14/more_targets_dev.json] [--worst 1.10]
@@ -45,7 +47,13 @@ from ship_criteria import criteria
 
 from wsp_env.evaluation.benchmark import score
 
-TARGET = re.compile(r"^slip_target_(\d+(?:\.\d+)?)kmh$")
+# the loops ``--loop`` reads, by the suffix their runs' names carry (``slip_target.loop_suffix``)
+LOOPS = {"default": "", "drift": "_drift"}
+
+
+def target_pattern(loop: str = "default") -> re.Pattern[str]:
+    """The names of one loop's constant targets (``LOOPS``), the km/h as the first group."""
+    return re.compile(rf"^slip_target_(\d+(?:\.\d+)?)kmh{LOOPS[loop]}$")
 
 
 def by_stop(rows: list[dict]) -> dict[tuple, dict]:
@@ -59,9 +67,12 @@ def loop_thresholds(data: dict[str, Any]) -> str:
     return (data.get("slip_target_loop") or {}).get("thresholds", "default")
 
 
-def load(paths: list[str]) -> tuple[dict[str, Any], dict[float, dict[tuple, dict]]]:
+def load(
+    paths: list[str], loop: str = "default"
+) -> tuple[dict[str, Any], dict[float, dict[tuple, dict]]]:
     """The first file's content (its classical WSP's and locked wheels' runs, its summary) and
-    each constant target's runs, keyed by (scenario, seed)."""
+    each constant target's runs of ``loop`` (``LOOPS``), keyed by (scenario, seed)."""
+    pattern = target_pattern(loop)
     first: dict[str, Any] = {}
     targets: dict[float, dict[tuple, dict]] = {}
     for path in paths:
@@ -87,7 +98,7 @@ def load(paths: list[str]) -> tuple[dict[str, Any], dict[float, dict[tuple, dict
         else:
             first = data
         for name, rows in runs.items():
-            m = TARGET.match(name)
+            m = pattern.match(name)
             if not m:
                 continue
             if float(m.group(1)) in targets:
@@ -97,7 +108,7 @@ def load(paths: list[str]) -> tuple[dict[str, Any], dict[float, dict[tuple, dict
                 raise ValueError(f"{path}: {name} did not run every stop of the classical WSP")
             targets[float(m.group(1))] = keyed
     if not targets:
-        raise ValueError("no slip_target_<x>kmh policy in the files")
+        raise ValueError(f"no slip_target_<x>kmh{LOOPS[loop]} policy in the files")
     return first, targets
 
 
@@ -187,9 +198,12 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("benchmark_json", nargs="+", help="development-stop benchmark files")
     ap.add_argument("--worst", type=float, default=1.10, help="worst stop / classical limit")
+    ap.add_argument("--loop", choices=tuple(LOOPS), default="default",
+                    help="whose constant targets: the default loop's or the drift-corrected "
+                         "loop's (slip_target_<x>kmh_drift)")  # fmt: skip
     args = ap.parse_args(argv)
     try:
-        first, targets = load(args.benchmark_json)
+        first, targets = load(args.benchmark_json, args.loop)
         table = choose(by_stop(first["run_results"]["classical"]), targets, args.worst)
         taught = teacher(first, targets, {rail: info["choice"] for rail, info in table.items()})
     except (OSError, ValueError, KeyError, TypeError) as err:

@@ -6,10 +6,12 @@ The stops are those whose rail is ``--rail`` among the seeds ``FRESH_SEED_BASE +
 with the benchmark's scenario, sensors and watchdog of ``--vehicle`` and ``--tier``
 (``benchmark_env_kwargs``), every policy on the same stops through the benchmark's runner. Per
 policy: the stops with a watchdog intervention, the longest lock and its stop, and the stops
-not stopped in the time limit. ``--policy`` is ``classical`` (the tier's frozen classical WSP),
-``target:X`` (a constant X km/h target on the slip-target loop of the tier, the environment's
-default loop) or anything ``wsp-env benchmark --policy`` takes (a model file, a shipped
-policy's name). ``--json`` keeps every run (written whole or not at all).
+not stopped in the time limit; with ``classical`` among the policies, each other's mean and
+worst per-stop ratio of stopping distance to it. ``--policy`` is ``classical`` (the tier's
+frozen classical WSP), ``target:X`` (a constant X km/h target on the slip-target loop of the
+tier, the environment's default loop), ``target:X:drift`` (the same with the loop's drift
+correction, ``wheels+accel`` only) or anything ``wsp-env benchmark --policy`` takes (a model
+file, a shipped policy's name). ``--json`` keeps every run (written whole or not at all).
 
     .venv/bin/python scripts/fresh_stops.py --rail leaves --draw 1200 \\
         --policy runs/train/bc_st_cap2_s1/student.zip --policy target:2 --policy classical \\
@@ -25,7 +27,9 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from wsp_env.baselines.slip_target import SlipTargetPolicy
+import numpy as np
+
+from wsp_env.baselines.slip_target import SlipTargetLoop, SlipTargetPolicy
 from wsp_env.core.config import load_vehicle
 from wsp_env.envs import make_core
 from wsp_env.envs.tiers import TIERS, VERSION, benchmark_env_kwargs
@@ -59,16 +63,22 @@ def rail_seeds(vehicle: str, tier: str, rail: str, draw: int) -> list[int]:
 
 
 def build_policy(spec: str, tier: str) -> Any:
-    """``target:X`` as a constant target on the tier's default loop; anything else as ``wsp-env
-    benchmark --policy`` builds it."""
+    """``target:X`` as a constant target on the tier's default loop (``target:X:drift``: with
+    the loop's drift correction); anything else as ``wsp-env benchmark --policy`` builds it."""
     if spec.startswith("target:"):
+        value, _, option = spec.removeprefix("target:").partition(":")
+        if option not in ("", "drift"):
+            raise ValueError(f"--policy {spec}: target:X or target:X:drift")
+        if option and tier != "wheels+accel":
+            raise ValueError(f"--policy {spec}: the drift correction needs --tier wheels+accel")
         try:
-            kmh = float(spec.split(":", 1)[1])
+            kmh = float(value)
         except ValueError:
             raise ValueError(f"--policy {spec}: target:X needs a number of km/h") from None
         if not 0.0 <= kmh <= 30.0:
             raise ValueError(f"--policy {spec}: a target in [0, 30] km/h")
-        return SlipTargetPolicy(kmh)  # the bound core's tier's loop
+        # the bound core's tier's loop
+        return SlipTargetPolicy(kmh, SlipTargetLoop(drift_correction=option == "drift"))
     return make_policy(spec, tier=tier)
 
 
@@ -85,15 +95,29 @@ def run(vehicle: str, tier: str, seeds: list[int], specs: list[str]) -> dict[str
     return out
 
 
-def summary(results: list[dict]) -> dict[str, Any]:
-    """A policy's watchdog stops, longest lock (and its stop) and stops not stopped."""
+def summary(results: list[dict], classical: list[dict] | None = None) -> dict[str, Any]:
+    """A policy's watchdog stops, longest lock (and its stop) and stops not stopped; with the
+    classical WSP's runs of the same stops, the mean and worst per-stop ratio of stopping
+    distance to it (and the worst's stop)."""
     longest = max(results, key=lambda r: r["max_lock_s"])
+    ratios = {}
+    if classical is not None:
+        ratio = np.array([r["stopping_distance_m"] for r in results]) / np.array(
+            [c["stopping_distance_m"] for c in classical]
+        )
+        worst = int(np.argmax(ratio))
+        ratios = {
+            "stop_ratio_mean": float(ratio.mean()),
+            "stop_ratio_worst": float(ratio[worst]),
+            "stop_ratio_worst_stop": results[worst]["scenario"],
+        }
     return {
         "stops": len(results),
         "watchdog_stops": [r["scenario"] for r in results if r["watchdog"]["total"] > 0],
         "longest_lock_s": float(longest["max_lock_s"]),
         "longest_lock_stop": longest["scenario"],
         "not_stopped": [r["scenario"] for r in results if not r["stopped"]],
+        **ratios,
     }
 
 
@@ -125,12 +149,16 @@ def main(argv: list[str] | None = None) -> int:
     last = FRESH_SEED_BASE + args.draw - 1
     print(f"{len(seeds)} {args.rail} stops among seeds {FRESH_SEED_BASE}-{last} "
           f"({args.vehicle}, {args.tier}, {VERSION})")  # fmt: skip
-    sums = {spec: summary(res) for spec, res in results.items()}
+    classical = results.get("classical")
+    sums = {spec: summary(res, classical) for spec, res in results.items()}
     for spec, s in sums.items():
         wd = s["watchdog_stops"]
+        ratio = (f", stop / classical: mean {s['stop_ratio_mean']:.4f}, worst "
+                 f"{s['stop_ratio_worst']:.3f} ({s['stop_ratio_worst_stop']})"
+                 if classical is not None and spec != "classical" else "")  # fmt: skip
         print(f"{spec}: watchdog on {len(wd)} ({', '.join(wd[:8])}{' ...' if len(wd) > 8 else ''}"
               f"), longest lock {s['longest_lock_s']:.2f} s ({s['longest_lock_stop']}), "
-              f"not stopped {len(s['not_stopped'])}")  # fmt: skip
+              f"not stopped {len(s['not_stopped'])}{ratio}")  # fmt: skip
     if args.json_path:
         path = Path(args.json_path)
         path.parent.mkdir(parents=True, exist_ok=True)

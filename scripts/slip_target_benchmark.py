@@ -14,7 +14,7 @@ until then: the wheels tier's 2.0 m/s^2 recovery hold and 3 s release interval w
     .venv/bin/python scripts/slip_target_benchmark.py --tier wheels+accel --target 4.25 \\
         [--target 2 --target 6] [--runs 300] [--stops development] [--vehicle regiolis] \\
         [--json runs/bench/slip_constant.json] [--rail-teacher] [--release always] \\
-        [--max-creep 0 --max-creep 0.2]
+        [--max-creep 0 --max-creep 0.2] [--drift-correction on]
 
 ``--rail-teacher`` adds ``baselines.oracle.SlipTargetOracle``: the privileged teacher of the
 imitation start (``oracle_target_rail``: each stop's constant target picked by its rail, which
@@ -71,6 +71,13 @@ def main(argv: list[str] | None = None) -> int:
         f"repeatable; default {DEFAULT_MAX_CREEP})",
     )
     ap.add_argument(
+        "--drift-correction",
+        action="append",
+        choices=("off", "on"),
+        help="the loop's correction of the aided reference's drift (wheels+accel only; "
+        "repeatable: each target under each; default off)",
+    )
+    ap.add_argument(
         "--thresholds",
         choices=("tier", "default"),
         default="tier",
@@ -86,17 +93,24 @@ def main(argv: list[str] | None = None) -> int:
     if any(not 0.0 <= c <= 1.0 for c in caps):
         print("--max-creep: a fraction of the reference speed in [0, 1]", file=sys.stderr)
         return 2
-    loops = [(g, c) for g in args.release or [DEFAULT_RELEASE] for c in caps]
+    drifts = [d == "on" for d in args.drift_correction or ["off"]]
+    if any(drifts) and args.tier != "wheels+accel":
+        print("--drift-correction on: needs --tier wheels+accel", file=sys.stderr)
+        return 2
+    loops = [
+        {"release": g, "max_creep": c, "drift_correction": d}
+        for g in args.release or [DEFAULT_RELEASE]
+        for c in caps
+        for d in drifts
+    ]
     wsp = load_wsp_config(tier=args.tier) if args.thresholds == "tier" else WSPConfig()
     policies: list = [
-        SlipTargetPolicy(t, SlipTargetLoop(wsp, release=g, max_creep=c))
-        for g, c in loops
-        for t in targets
+        SlipTargetPolicy(t, SlipTargetLoop(wsp, **kw)) for kw in loops for t in targets
     ]
     if args.rail_teacher:  # under each loop too (named where it is not the default)
-        for g, c in loops:
+        for kw in loops:
             teacher = SlipTargetOracle()
-            teacher.loop = SlipTargetLoop(wsp, release=g, max_creep=c)
+            teacher.loop = SlipTargetLoop(wsp, **kw)
             teacher.name += loop_suffix(teacher.loop)
             policies.append(teacher)
     result = run_benchmark(policies, vehicle=args.vehicle, tier=args.tier, runs=args.runs,

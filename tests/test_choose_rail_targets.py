@@ -107,3 +107,23 @@ def test_a_sealed_file_or_other_stops_are_refused_in_one_line(tmp_path, capsys):
         assert choose_rail_targets.main(files) == 2
         err = capsys.readouterr().err.strip()
         assert len(err.splitlines()) == 1 and says in err, err
+
+
+def test_the_drift_corrected_loops_targets_are_read_apart(tmp_path, capsys):
+    """``--loop drift`` reads only ``slip_target_<x>kmh_drift`` and the default only the
+    unsuffixed names: a file holding both loops' runs gives each its own table."""
+    path = bench(tmp_path / "a.json", {
+        "slip_target_2kmh": runs_of([90.0, 90.0, 99.0, 99.0], [-4.5, -4.5, -4.0, -4.0]),
+        "slip_target_3kmh": runs_of([95.0, 95.0, 95.0, 95.0], [-4.6, -4.6, -3.0, -3.0]),
+        "slip_target_2kmh_drift": runs_of([90.0, 90.0, 80.0, 80.0], [-4.5, -4.5, -2.0, -2.0]),
+        "slip_target_3kmh_drift": runs_of([95.0, 95.0, 95.0, 95.0], [-4.6, -4.6, -3.0, -3.0]),
+    })  # fmt: skip
+    assert choose_rail_targets.main([path]) == 0
+    assert capsys.readouterr().out.rstrip().endswith("leaves: 3\n  wet: 2")
+    assert choose_rail_targets.main([path, "--loop", "drift"]) == 0
+    assert capsys.readouterr().out.rstrip().endswith("leaves: 2\n  wet: 2")
+    only_default = bench(tmp_path / "b.json", {
+        "slip_target_2kmh": runs_of([90.0] * 4, [-4.5] * 4),
+    })  # fmt: skip
+    assert choose_rail_targets.main([only_default, "--loop", "drift"]) == 2
+    assert "no slip_target_<x>kmh_drift policy" in capsys.readouterr().err

@@ -43,6 +43,24 @@ def test_stops_of_one_rail_run_under_every_policy(tmp_path, capsys):
         assert s["stops"] == len(seeds)
         assert s["longest_lock_s"] == max(r["max_lock_s"] for r in runs)
     assert f"{len(seeds)} dry stops among seeds" in capsys.readouterr().out
+    # each policy's per-stop ratios to the classical WSP's runs of the same stops
+    mine = [r["stopping_distance_m"] for r in data["run_results"]["target:3"]]
+    base = [r["stopping_distance_m"] for r in data["run_results"]["classical"]]
+    ratio = [m / b for m, b in zip(mine, base, strict=True)]
+    s = data["summary"]["target:3"]
+    assert s["stop_ratio_mean"] == pytest.approx(sum(ratio) / len(ratio), rel=1e-12)
+    worst = ratio.index(max(ratio))
+    assert s["stop_ratio_worst"] == ratio[worst]
+    assert s["stop_ratio_worst_stop"] == data["run_results"]["target:3"][worst]["scenario"]
+
+
+def test_a_target_with_the_drift_correction_runs_the_corrected_loop():
+    """``target:X:drift`` is the tier's loop with the drift correction (named so); plain
+    ``target:X`` is the environment's default loop."""
+    drift = fresh_stops.build_policy("target:2:drift", "wheels+accel")
+    plain = fresh_stops.build_policy("target:2", "wheels+accel")
+    assert drift.loop.drift_correction and not plain.loop.drift_correction
+    assert drift.name == "slip_target_2kmh_drift" and plain.name == "slip_target_2kmh"
 
 
 @pytest.mark.parametrize(
@@ -53,6 +71,8 @@ def test_stops_of_one_rail_run_under_every_policy(tmp_path, capsys):
         (["--rail", "dry", "--policy", "target:40"], "a target in [0, 30] km/h"),
         (["--rail", "dry", "--draw", "0", "--policy", "classical"], "--draw: must be"),
         (["--rail", "dry", "--policy", "no_such_model.zip"], "no_such_model.zip"),
+        (["--rail", "dry", "--policy", "target:2:fast"], "target:X or target:X:drift"),
+        (["--rail", "dry", "--tier", "wheels", "--policy", "target:2:drift"], "needs --tier"),
     ],
 )
 def test_bad_input_is_one_line_and_no_file(tmp_path, capsys, argv, words):

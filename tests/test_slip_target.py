@@ -296,6 +296,8 @@ def test_gymnasium_and_sb3_checkers_pass_with_memory_features(kwargs):
         ({"slip_target_release": 1}, "slip_target_release"),
         ({"slip_target_max_creep": -0.1}, "slip_target_max_creep"),
         ({"slip_target_max_creep": 1.5}, "slip_target_max_creep"),
+        ({"slip_target_drift_correction": 1}, "slip_target_drift_correction"),
+        ({"slip_target_drift_correction": "yes"}, "slip_target_drift_correction"),
     ],
 )
 def test_bad_slip_target_argument_is_one_line(kwargs, name):
@@ -516,7 +518,13 @@ def test_training_config_and_trained_model_carry_the_mode(tmp_path):
     # uncapped)
     assert policy.env_kwargs["slip_target_release"] == "working"
     assert policy.env_kwargs["slip_target_max_creep"] == 0.2
+    assert policy.env_kwargs["slip_target_drift_correction"] is False
     meta = model_metadata(out / "best_model.zip")
+    del meta["env_kwargs"]["slip_target_drift_correction"]
+    assert (
+        model_metadata(out / "best_model.zip")["env_kwargs"]["slip_target_drift_correction"]
+        is False
+    )
     del meta["env_kwargs"]["slip_target_max_creep"]
     old = tmp_path / "old.zip"
     shutil.copy(out / "best_model.zip", old)
@@ -526,6 +534,7 @@ def test_training_config_and_trained_model_carry_the_mode(tmp_path):
     write_model_metadata(old, meta)
     kw = model_metadata(old)["env_kwargs"]
     assert (kw["slip_target_release"], kw["slip_target_max_creep"]) == ("working", 0.0)
+    assert kw["slip_target_drift_correction"] is False  # a file from before the correction
     del meta["env_kwargs"]["slip_target_release"]
     write_model_metadata(old, meta)
     kw = model_metadata(old)["env_kwargs"]
@@ -543,6 +552,7 @@ def test_training_config_and_trained_model_carry_the_mode(tmp_path):
     # started before it and resumes with the loop it began with
     assert saved["env_kwargs"]["slip_target_release"] == "working"
     assert saved["env_kwargs"]["slip_target_max_creep"] == 0.2
+    assert saved["env_kwargs"]["slip_target_drift_correction"] is False
     old_run = pin_loop_settings(cfg, started_before=True).env_kwargs
     assert (old_run["slip_target_release"], old_run["slip_target_max_creep"]) == ("always", 0.0)
     pinned = pin_loop_settings(cfg, started_before=False)
@@ -573,6 +583,7 @@ def test_training_config_and_trained_model_carry_the_mode(tmp_path):
     assert loop["gain_per_kmh"] == 0.2 and loop["tier"] == "wheels"
     assert loop["release"] == "working" and loop["max_creep"] == 0.2
     assert loop["max_creep_floor_kmh"] == 2.0
+    assert loop["drift_correction"] is False and loop["drift_min_span_s"] == 0.5
     assert (loop["working_band_kmh"], loop["working_band_rel"]) == pytest.approx((1.04, 0.0606))
     assert loop["wsp"] == dataclasses.asdict(load_wsp_config(tier="wheels"))
 
@@ -684,3 +695,105 @@ def test_a_loop_built_without_thresholds_takes_its_cores_tier():
             break
     distance = "stopping_distance_m"
     assert abs(control["metrics"][distance] - info["metrics"][distance]) > 1.0
+
+
+def _drift_obs(core, v_train: float, wheels: np.ndarray, v_ref: float, age_s: float) -> np.ndarray:
+    """One kernel observation of ``core`` with these speeds (m/s) and reference age (s)."""
+    na = core.n_axles
+    obs = np.zeros((1, core.kernel_obs_dim), dtype=np.float32)
+    v_s, age_s_scale = core.obs_par[K.OP_SPEED_SCALE], core.obs_par[K.OP_AGE_SCALE]
+    obs[0, :na] = wheels / v_s
+    obs[0, 3 * na : 4 * na] = 0.5  # cylinders at half the demand
+    obs[0, 4 * na] = 1.0
+    obs[0, 4 * na + 1] = v_ref / v_s
+    obs[0, -1] = age_s / age_s_scale
+    return obs.astype(np.float64)
+
+
+def test_the_drift_correction_tracks_the_train_through_anchors_the_estimator_learns_little_at():
+    """A synthetic stop: the train slows at 0.5 m/s^2, every wheel 0.3 m/s under it, and the
+    aided reference drifts 0.3 m/s^2 above it between anchors (a wheel rolling free, the
+    reference set to the train), as the kernel's estimator does with an offset it has not
+    learned. Anchors at 1, 2 and 3 s (spans under ``ACC_LEARN_MIN_SPAN_S``: the estimator
+    learns nothing, the drift stays), then at 5.5 and 8 s (it learns ``accel_offset_gain`` =
+    half each time: 0.15, then 0.075 m/s^2). From the first anchor on, the corrected reference
+    the loop tracks is the train's speed to the observation's float32 precision (the drift's
+    whole 0.3 m/s at 1 s otherwise: checked as the control); before it, the estimator's own."""
+    core = make_core(1, accelerometer=True)
+    loop = SlipTargetLoop(load_wsp_config(tier="wheels+accel"), drift_correction=True)
+    loop.bind(core)
+    loop.reset(np.array([0]))
+    assert loop.learn_gain == 0.5
+    dt = core.sim.control_period_s
+    anchors = {50: False, 100: False, 150: False, 275: True, 400: True}  # period: learned?
+    drift, last, errors, raw_errors = 0.3, 0, [], []
+    for k in range(500):
+        t = k * dt
+        v = 30.0 - 0.5 * t
+        if k in anchors:
+            drift, last = (drift * 0.5 if anchors[k] else drift), k
+        raw = v + drift * (k - last) * dt  # at an anchor: the train's speed
+        wheels = np.full(core.n_axles, v - 0.3)
+        if k in anchors:
+            wheels[0] = v
+        loop.advance(_drift_obs(core, v, wheels, raw, (k - last) * dt))
+        (errors if k >= 50 else raw_errors).append(loop.v_ref[0] - (v if k >= 50 else raw))
+        if k >= 50:
+            raw_errors.append(raw - v)
+    assert np.max(np.abs(errors)) < 1e-5  # the observation's float32 rounding of 30 m/s
+    assert np.max(raw_errors) > 0.29  # the control: the estimator's reference drifted 0.3 m/s
+
+
+OPTS_UPHILL_LEAVES = {
+    "rail": "leaves", "mu_contaminated": 0.041, "speed_kmh": 60.0, "pattern": "uniform",
+    "gradient_permille": 21.4, "accelerometer_bias_mps2": -0.12,
+}  # fmt: skip
+
+
+def _uphill_leaves_stop(drift_correction: bool) -> tuple[float, int, float]:
+    """Stopping distance (m), anchors (the reference's age falling) and the accelerometer
+    offset the estimator learned (m/s^2) on an uphill leaves stop at a constant 1.5 km/h,
+    with the benchmark's ``wheels+accel`` sensors."""
+    from wsp_env.envs.tiers import benchmark_env_kwargs
+
+    kw = benchmark_env_kwargs("uic_z1", "wheels+accel")
+    kw.pop("max_time_s")
+    env = WSPBrakingEnv(
+        **kw, action_mode="slip_target", slip_target_drift_correction=drift_correction
+    )
+    env.reset(seed=0, options=OPTS_UPHILL_LEAVES)
+    action = _action_for(1.5, env.action_space.shape)
+    anchors, prev = 0, 0.0
+    while True:
+        *_, term, trunc, info = env.step(action)
+        age = env.core.wsp[0, K.W_AGE]
+        anchors, prev = anchors + int(age < prev - 1e-9), age
+        if term or trunc:
+            learned = float(env.core.wsp[0, K.W_ACC_CORR])
+            return info["metrics"]["stopping_distance_m"], anchors, learned
+
+
+def test_the_drift_correction_ends_the_anchor_cycle_of_a_low_target_uphill():
+    """Leaves, 60 km/h, +21.4 per mille, accelerometer bias -0.12 m/s^2, 1.5 km/h. Without the
+    correction the reference rises above the train (the accelerometer reads the specific
+    force, 0.33 m/s^2 under the train's deceleration), the target reads as reached with the
+    wheels gripping, the loop vents every axle, they roll free and the estimator anchors about
+    a second later, too soon to learn the offset: 20 anchors, nothing learned, 301.2 m
+    (measured). With it: 7 anchors, 0.33 m/s^2 learned, 282.4 m."""
+    plain, plain_anchors, plain_learned = _uphill_leaves_stop(False)
+    fixed, fixed_anchors, fixed_learned = _uphill_leaves_stop(True)
+    assert plain_anchors >= 15 and plain_learned == 0.0
+    assert fixed_anchors <= 10 and fixed_learned > 0.25
+    assert fixed < 0.97 * plain
+
+
+def test_the_drift_correction_needs_the_accelerometer_and_is_off_by_default():
+    assert WSPBrakingEnv(action_mode="slip_target").core.loop.drift_correction is False
+    vec = WSPBrakingVectorEnv(
+        num_envs=2, action_mode="slip_target", accelerometer=True, slip_target_drift_correction=True
+    )
+    assert vec.core.loop.drift_correction is True
+    with pytest.raises(ValueError, match=r"^slip_target_drift_correction: needs the acc") as err:
+        WSPBrakingEnv(action_mode="slip_target", slip_target_drift_correction=True)
+    assert len(str(err.value).splitlines()) == 1
+    assert SlipTargetPolicy(2.0, SlipTargetLoop(drift_correction=True)).name.endswith("_drift")

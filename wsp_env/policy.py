@@ -281,7 +281,8 @@ POLICY_ENV_KWARGS = (
     "action_mode", "residual_scale", "residual_deadband", "valve_group", "privileged",
     "accelerometer", "accelerometer_bias_mps2", "control_period_s", "action_repeat",
     "slip_target_min_kmh", "slip_target_max_kmh", "slip_target_gain_per_kmh",
-    "slip_target_lead_s", "slip_target_release", "slip_target_max_creep", "memory_features",
+    "slip_target_lead_s", "slip_target_release", "slip_target_max_creep",
+    "slip_target_drift_correction", "memory_features",
 )  # fmt: skip
 # the slip-target loop's periodic-release gate of a model file that does not name it: written
 # before the gate existed (2026-11-27), trained and judged with the ungated loop
@@ -292,15 +293,24 @@ LEGACY_SLIP_TARGET_RELEASE = "always"
 LEGACY_LOOP_SETTINGS: dict[str, Any] = {
     "slip_target_release": LEGACY_SLIP_TARGET_RELEASE,
     "slip_target_max_creep": 0.0,
+    "slip_target_drift_correction": False,
 }
 
 
 def loop_settings_now() -> dict[str, Any]:
     """The slip-target loop's later settings (``LEGACY_LOOP_SETTINGS``' keys) as the environment
     sets them by default now: what model files and run folders are written with."""
-    from wsp_env.baselines.slip_target import DEFAULT_MAX_CREEP, DEFAULT_RELEASE
+    from wsp_env.baselines.slip_target import (
+        DEFAULT_DRIFT_CORRECTION,
+        DEFAULT_MAX_CREEP,
+        DEFAULT_RELEASE,
+    )
 
-    return {"slip_target_release": DEFAULT_RELEASE, "slip_target_max_creep": DEFAULT_MAX_CREEP}
+    return {
+        "slip_target_release": DEFAULT_RELEASE,
+        "slip_target_max_creep": DEFAULT_MAX_CREEP,
+        "slip_target_drift_correction": DEFAULT_DRIFT_CORRECTION,
+    }
 
 
 META_NAME = "wsp_env.json"  # the metadata entry ``wsp-env train`` adds to every model file

@@ -165,6 +165,9 @@ OBS_CLIP = 5.0
 # m/s^2, the largest accelerometer offset the estimator learns: the benchmark's bias (0.3) and
 # gradient (25 per mille, 0.25) together reach 0.55; more is a fault, not an offset
 ACC_CORR_MAX = 1.0
+# the aided reference learns its offset only at an anchor this long (s) after the last: the
+# sensor's lag at the brakes' onset is noise (``update_reference``)
+ACC_LEARN_MIN_SPAN_S = 2.0
 MODE_CONTINUOUS = 0
 MODE_DISCRETE = 1
 
@@ -350,7 +353,7 @@ def update_reference(
             # made the dead-reckoned speed miss the anchor by this much a second; a share of it
             # is learned (over at least 2 s: the sensor's lag at the brakes' onset is noise)
             # (``span``: since the last anchor, or the stop's start before the first)
-            if span >= 2.0 and obs_par[OP_ACC_OFFSET_GAIN] > 0.0:
+            if span >= ACC_LEARN_MIN_SPAN_S and obs_par[OP_ACC_OFFSET_GAIN] > 0.0:
                 miss = (wsp[e, W_VACC] - anchor) / span
                 corr = wsp[e, W_ACC_CORR] + obs_par[OP_ACC_OFFSET_GAIN] * miss
                 wsp[e, W_ACC_CORR] = min(max(corr, -ACC_CORR_MAX), ACC_CORR_MAX)

@@ -248,6 +248,7 @@ num_envs=N, **kwargs)``:
 | ``slip_target_lead_s`` | float | ``0.1`` | slip-target mode: the inner loop's lead on the measured wheel deceleration, s, [0, 1] |
 | ``slip_target_release`` | str | ``"working"`` | slip-target mode: when the inner loop's periodic release may begin: ``working``, only while the loop works (some axle asked for under the full demand in the last period, or a wheel's measured slip is beyond the estimator's working band), as the classical WSP; ``always``, whenever the reference's age allows (the loop before 2026-11-27; a policy file that does not name it loads with it) |
 | ``slip_target_max_creep`` | float | ``0.2`` | slip-target mode: each target at most this fraction of the reference speed, or 2 km/h where that is more (a lower target is kept; a target fixed in km/h grows into a near-lock as the train slows), [0, 1]; 0: no cap (the loop before 2026-11-27's cap; a policy file that does not name it loads with 0) |
+| ``slip_target_drift_correction`` | bool | ``False`` | slip-target mode, ``wheels+accel`` tier (an error without the accelerometer): the loop tracks the slip against the aided reference less the drift its last anchor showed and the estimator did not learn (``baselines/slip_target.py``; docs/training.md, "The slip-target loop's drift correction"); a policy file that does not name it loads with ``False`` |
 | ``stagger_reset_steps`` | int | ``0`` | vector class only (the single class takes only 0), a training option: ``reset`` advances each environment a random, seeded number of steps below this into a stop, driven by the classical WSP, so that stops do not all end together (``WSPBrakingVectorEnv``'s docstring); 0: off |
 | ``memory_features`` | bool | False | append the memory features (Observation Space): per axle time in the current slide, time since the last release, sliding-energy estimate |
 | ``substep_s`` | float | ``0.001`` | the physics substep (linearly implicit; docs/physics.md) |
@@ -311,6 +312,10 @@ num_envs=N, **kwargs)``:
   train slowed (an 8 km/h target at 10 km/h), and on the UIC-Z1's development stops an 8 km/h
   target's longest lock was 13.5 s. A policy file that does not name the cap was written
   before it and loads with 0; files written since name it.
+* v3, 2026-11-28 (no new version, as above; off by default, so no stop moves): the
+  slip-target loop may correct the aided reference's drift from its anchors
+  (``slip_target_drift_correction=True``, ``wheels+accel`` only). A policy file that does not
+  name it loads with ``False``.
 """
 
 from __future__ import annotations
@@ -326,7 +331,11 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from wsp_env.baselines.slip_target import DEFAULT_MAX_CREEP, DEFAULT_RELEASE
+from wsp_env.baselines.slip_target import (
+    DEFAULT_DRIFT_CORRECTION,
+    DEFAULT_MAX_CREEP,
+    DEFAULT_RELEASE,
+)
 from wsp_env.core import kernel as K
 from wsp_env.core.braking import TERM_NAMES, BrakingCore, RewardConfig, ScenarioConfig
 from wsp_env.core.config import RailConfig, VehicleConfig
@@ -340,10 +349,12 @@ def make_core(n_envs: int, **kwargs: Any) -> BrakingCore:
     (``configs/wsp/classical.yaml``, with ``accelerometer`` ``classical_accel.yaml``) is the
     controller the residual acts on; with ``action_mode="slip_target"`` the slip-target inner
     loop (``baselines.slip_target.SlipTargetLoop``, with ``slip_target_gain_per_kmh``,
-    ``slip_target_lead_s``, ``slip_target_release`` and ``slip_target_max_creep``, on the same
-    tier's classical thresholds) tracks the targets."""
+    ``slip_target_lead_s``, ``slip_target_release``, ``slip_target_max_creep`` and
+    ``slip_target_drift_correction``, on the same tier's classical thresholds) tracks the
+    targets."""
     from wsp_env.baselines.slip_target import (
         SlipTargetLoop,
+        check_drift_correction,
         check_loop_args,
         check_max_creep,
         check_release,
@@ -355,6 +366,9 @@ def make_core(n_envs: int, **kwargs: Any) -> BrakingCore:
     )
     release = check_release(kwargs.pop("slip_target_release", DEFAULT_RELEASE))
     max_creep = check_max_creep(kwargs.pop("slip_target_max_creep", DEFAULT_MAX_CREEP))
+    drift = check_drift_correction(
+        kwargs.pop("slip_target_drift_correction", DEFAULT_DRIFT_CORRECTION)
+    )
     mode = kwargs.get("action_mode")
     if mode in ("residual", "slip_target"):
         from wsp_env.baselines.classical import ClassicalWSP, accelerometer_tier, load_wsp_config
@@ -369,6 +383,7 @@ def make_core(n_envs: int, **kwargs: Any) -> BrakingCore:
                 lead_s=lead,
                 release=release,
                 max_creep=max_creep,
+                drift_correction=drift,
             )
             kwargs.setdefault("slip_target_loop", loop)
     return BrakingCore(n_envs, **kwargs)
@@ -447,6 +462,7 @@ class WSPBrakingEnv(gym.Env):
         slip_target_lead_s: float = 0.1,
         slip_target_release: str = DEFAULT_RELEASE,
         slip_target_max_creep: float = DEFAULT_MAX_CREEP,
+        slip_target_drift_correction: bool = DEFAULT_DRIFT_CORRECTION,
         memory_features: bool = False,
         stagger_reset_steps: int = 0,
     ) -> None:
@@ -472,7 +488,9 @@ class WSPBrakingEnv(gym.Env):
             slip_target_min_kmh=slip_target_min_kmh, slip_target_max_kmh=slip_target_max_kmh,
             slip_target_gain_per_kmh=slip_target_gain_per_kmh,
             slip_target_lead_s=slip_target_lead_s, slip_target_release=slip_target_release,
-            slip_target_max_creep=slip_target_max_creep, memory_features=memory_features,
+            slip_target_max_creep=slip_target_max_creep,
+            slip_target_drift_correction=slip_target_drift_correction,
+            memory_features=memory_features,
         )  # fmt: skip
         self.action_space = self.core.action_space()
         self.observation_space = self.core.observation_space()
@@ -632,6 +650,7 @@ class WSPBrakingVectorEnv(VectorEnv):
         slip_target_lead_s: float = 0.1,
         slip_target_release: str = DEFAULT_RELEASE,
         slip_target_max_creep: float = DEFAULT_MAX_CREEP,
+        slip_target_drift_correction: bool = DEFAULT_DRIFT_CORRECTION,
         memory_features: bool = False,
         stagger_reset_steps: int = 0,
     ) -> None:
@@ -659,7 +678,9 @@ class WSPBrakingVectorEnv(VectorEnv):
             slip_target_min_kmh=slip_target_min_kmh, slip_target_max_kmh=slip_target_max_kmh,
             slip_target_gain_per_kmh=slip_target_gain_per_kmh,
             slip_target_lead_s=slip_target_lead_s, slip_target_release=slip_target_release,
-            slip_target_max_creep=slip_target_max_creep, memory_features=memory_features,
+            slip_target_max_creep=slip_target_max_creep,
+            slip_target_drift_correction=slip_target_drift_correction,
+            memory_features=memory_features,
         )  # fmt: skip
         self.num_envs = num_envs
         self.render_mode = render_mode

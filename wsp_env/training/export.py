@@ -130,7 +130,7 @@ def input_spec(policy: SB3Policy) -> dict[str, Any]:
     the environment of ``policy``'s settings resolves them (the ONNX metadata's ``inputs``)."""
     import dataclasses
 
-    from wsp_env.baselines.slip_target import MAX_CREEP_FLOOR_KMH
+    from wsp_env.baselines.slip_target import DRIFT_MIN_SPAN_S, MAX_CREEP_FLOOR_KMH
     from wsp_env.core import braking as B
     from wsp_env.core import kernel as K
     from wsp_env.envs import make_core
@@ -193,6 +193,10 @@ def input_spec(policy: SB3Policy) -> dict[str, Any]:
             # that is more (0: no cap)
             "max_creep": loop.max_creep,
             "max_creep_floor_kmh": MAX_CREEP_FLOOR_KMH,
+            # the aided reference less the drift its last anchor showed and the estimator did
+            # not learn (rate over at least drift_min_span_s; baselines/slip_target.py)
+            "drift_correction": loop.drift_correction,
+            "drift_min_span_s": DRIFT_MIN_SPAN_S,
             "tier": tier,
             "wsp": dataclasses.asdict(loop.cfg),
         }
