@@ -1,6 +1,8 @@
 """A copy of a slip-target model file with its loop's later settings set: the periodic
-release's gate (``--release``: ``slip_target_release``, ``working`` or ``always``) and the creep
-cap (``--max-creep``: ``slip_target_max_creep``, 0-1, 0 no cap; docs/environment.md), so that a
+release's gate (``--release``: ``slip_target_release``, ``working`` or ``always``), the creep
+cap (``--max-creep``: ``slip_target_max_creep``, 0-1, 0 no cap) and the drift correction
+(``--drift-correction on|off``: ``slip_target_drift_correction``, an accelerometer model's;
+docs/environment.md), so that a
 policy trained before a setting existed (which loads with the loop it was made with:
 ``policy.LEGACY_LOOP_SETTINGS``) can be scored with today's loop, or the other way round. The
 copy takes its observation statistics (``STEM.vecnormalize.pkl``) along; nothing else of the
@@ -48,6 +50,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("out", type=Path, help="the copy to write (.zip)")
     ap.add_argument("--release", choices=RELEASE_GATES, help="the periodic release's gate")
     ap.add_argument("--max-creep", help="the cap on the target, a fraction of the reference speed")
+    ap.add_argument(
+        "--drift-correction",
+        choices=("on", "off"),
+        help="the loop's correction of the aided reference's drift (accelerometer models)",
+    )
     args = ap.parse_args(argv)
     try:
         settings: dict = {}
@@ -59,8 +66,12 @@ def main(argv: list[str] | None = None) -> int:
             except ValueError:
                 raise ValueError(f"--max-creep: a number, got {args.max_creep!r}") from None
             settings["slip_target_max_creep"] = check_max_creep(value)
+        if args.drift_correction is not None:
+            settings["slip_target_drift_correction"] = args.drift_correction == "on"
         if not settings:
-            raise ValueError("nothing to set: give --release and/or --max-creep")
+            raise ValueError(
+                "nothing to set: give --release, --max-creep and/or --drift-correction"
+            )
         if args.out.suffix != ".zip":
             raise ValueError(f"{args.out}: the copy must be a .zip model file")
         if args.out.resolve() == args.model.resolve():
@@ -69,6 +80,12 @@ def main(argv: list[str] | None = None) -> int:
         mode = meta["env_kwargs"].get("action_mode", "continuous")
         if mode != "slip_target":
             raise ValueError(f"{args.model}: not a slip-target model (action_mode {mode!r})")
+        if settings.get("slip_target_drift_correction") and not meta["env_kwargs"].get(
+            "accelerometer"
+        ):
+            raise ValueError(
+                f"{args.model}: trained without the accelerometer; the drift correction needs it"
+            )
         norm = args.model.with_suffix(".vecnormalize.pkl")
         if meta.get("obs_normalization") and not norm.exists():
             raise ValueError(f"{args.model}: trained on normalised observations, {norm} missing")

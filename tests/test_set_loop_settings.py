@@ -61,6 +61,11 @@ def test_the_copy_names_the_settings_and_keeps_the_rest(tmp_path, capsys):
     assert set_loop_settings.main([str(old), str(gate_only), "--release", "working"]) == 0
     kw = model_metadata(gate_only)["env_kwargs"]
     assert (kw["slip_target_release"], kw["slip_target_max_creep"]) == ("working", 0.0)
+    assert kw["slip_target_drift_correction"] is False  # a file from before it: the loop without
+    drift = tmp_path / "drift" / "student.zip"
+    assert set_loop_settings.main([str(old), str(drift), "--drift-correction", "on"]) == 0
+    kw = model_metadata(drift)["env_kwargs"]
+    assert kw["slip_target_drift_correction"] is True and kw["slip_target_release"] == "always"
 
 
 def test_an_existing_copy_or_a_failed_write_leaves_nothing_new(tmp_path, capsys, monkeypatch):
@@ -83,7 +88,8 @@ def test_an_existing_copy_or_a_failed_write_leaves_nothing_new(tmp_path, capsys,
 
 
 @pytest.mark.parametrize(
-    "case", ["continuous", "same", "suffix", "missing", "nothing", "creep_range", "creep_text"]
+    "case",
+    ["continuous", "same", "suffix", "missing", "nothing", "creep_range", "creep_text", "no_accel"],
 )
 def test_bad_input_is_one_line_and_writes_nothing(tmp_path, capsys, case):
     model = _slip_target_model(tmp_path)
@@ -95,6 +101,11 @@ def test_bad_input_is_one_line_and_writes_nothing(tmp_path, capsys, case):
         settings, want = ["--max-creep", "1.5"], "slip_target_max_creep"
     elif case == "creep_text":
         settings, want = ["--max-creep", "much"], "--max-creep: a number"
+    elif case == "no_accel":
+        meta = model_metadata(model)
+        meta["env_kwargs"]["accelerometer"] = False
+        write_model_metadata(model, meta)
+        settings, want = ["--drift-correction", "on"], "trained without the accelerometer"
     elif case == "continuous":
         model = pretrained_dir() / "ppo_bc_uic_z1.zip"
         want = "not a slip-target model"
