@@ -74,15 +74,17 @@ what the sensor model measures) — exactly as the classical WSP (``classical.py
   learns the reading's offset (bias and the gradient a specific-force sensor reads) only at an
   anchor at least ``kernel.ACC_LEARN_MIN_SPAN_S`` (2 s) after the last, and then
   ``accel_offset_gain`` (half) of it. A loop holding a low target can keep it from ever
-  learning: on an uphill leaves stop (+21 per mille, bias -0.12 m/s^2) the reference rose above
-  the train at 1.3 km/h a second, a 1 km/h target read as reached with every wheel gripping, the
-  loop vented every axle, every wheel rolled free, the estimator anchored about 1 s later — too
-  soon to learn — and the cycle repeated all stop (the train braked about half the time; 1.84x
-  the classical WSP's distance). With the correction the loop reads each anchor's jump of the
-  reference (what it drifted since the last anchor, a rate over the time between them), takes
-  away the share the estimator learned at that anchor, and subtracts the rest times the time
-  since the anchor from the reference it tracks (never below the fastest wheel): a constant
-  offset is corrected from the first anchor on, whether the estimator learned at it or not.
+  learning: on an uphill leaves stop (+21.4 per mille, bias -0.12 m/s^2, 60 km/h, 1.5 km/h)
+  the reference rises above the train, the target reads as reached with every wheel
+  gripping, the loop vents every axle, every wheel rolls free and the estimator anchors on
+  them 0.5-2 s after the last anchor — too soon to learn — and the cycle repeats to
+  standstill (94 anchors, none 2 s after the last, nothing learned, 301.2 m). With the
+  correction the loop reads each anchor from the observation by the estimator's own rule,
+  reads the anchor's jump of the reference (what it drifted since the last anchor, a rate
+  over the time between them), takes away the share the estimator learned at that anchor,
+  and subtracts the rest times the time since the anchor from the reference it tracks (never
+  below the fastest wheel): 49 anchors, 5 of them 2 s after the last, 0.32 m/s^2 learned,
+  286.7 m (``tests/test_slip_target.py``).
   ``docs/training.md``, "The slip-target loop's drift correction".
 
 The commands are continuous valve actions (``2 f - 1``), so the loop can drive any continuous
@@ -235,11 +237,15 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
                 "it corrects the aided reference's drift"
             )
         self.learn_gain = float(core.obs_par[K.OP_ACC_OFFSET_GAIN])
+        # the kernel's previous-action entries: the valve commands of the period just run
+        self.valve_cols = slice(4 * na + 2, 4 * na + 2 + core.n_valves)
         self.v_ref = np.zeros(n)
         self.raw_ref = np.full(n, np.nan)
         self.raw_decel = np.zeros(n)
+        self.prev_wheels = np.zeros((n, na))
         self.since_anchor = np.zeros(n)
         self.drift = np.zeros(n)
+        self.anchored = np.zeros(n, dtype=bool)  # the estimator anchored in the last period
 
     def reset(self, env_ids: np.ndarray) -> None:
         """Environments ``env_ids`` start a new stop."""
@@ -251,24 +257,46 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         self.prev_age[env_ids] = 0.0
         self.raw_ref[env_ids] = np.nan
         self.raw_decel[env_ids] = 0.0
+        self.prev_wheels[env_ids] = 0.0
+        self.anchored[env_ids] = False
         self.since_anchor[env_ids] = 0.0
         self.drift[env_ids] = 0.0
 
     # bound once (``bind``); every other array evolves (``state_dict``)
     _CONSTANT = frozenset({"valve_of_axle", "valve_starts", "_rows"})  # and ref_limit, a float
 
-    def _correct_drift(self, v_ref: np.ndarray, age: np.ndarray, v: np.ndarray) -> np.ndarray:
+    def _correct_drift(
+        self, obs: np.ndarray, v_ref: np.ndarray, age: np.ndarray, v: np.ndarray
+    ) -> np.ndarray:
         """The reference the loop tracks (m/s): the estimator's ``v_ref`` less the drift its last
         anchor showed and it did not learn, times the time since that anchor (module
         docstring), never below the fastest wheel (or ``v_ref``, where that is lower); advances
-        the correction's state. An anchor is the reference's age falling; its jump (the
-        estimator's reference a period before, less its fall over the period before that, less
-        now) is what the
-        reference drifted since the anchor before (the stop's start before the first): the
-        estimator's own span, over which it learned ``learn_gain`` of it if at least
-        ``ACC_LEARN_MIN_SPAN_S`` long."""
+        the correction's state.
+
+        **An anchor** is read from the observation by the estimator's own rule
+        (``kernel.update_reference``, ``estimate_and_supervise``): it anchors only while the WSP
+        works — a valve was out of apply in the period (the kernel's previous-action entries
+        under 1), or a wheel slipped beyond the working band at its start (the last period's
+        reading and reference) — and the demand stands, and an anchor sets the reference's age
+        to 0, which otherwise grows while the WSP has worked since the last anchor. So the age
+        at 0 in a period in which the WSP worked is an anchor, and no other period is: anchors
+        in consecutive periods (a wheel rolling free for several) and anchors after an idle
+        spell (the age held at 0) are each seen, and the time since the last one is the
+        estimator's own span. **Its jump** (the estimator's reference a period before, less its
+        fall over the period before that, less now) is what the reference drifted over that
+        span, over which the estimator learned ``learn_gain`` of its miss if the span was at
+        least ``ACC_LEARN_MIN_SPAN_S``; the rest a second is the drift taken away until the
+        next anchor (read only over ``DRIFT_MIN_SPAN_S`` or more). A drift downward is bounded
+        by the fastest wheel, which holds the estimator's reference up; only what the jump
+        shows is corrected."""
         dt = self.dt
-        anchored = (age < self.prev_age - 1e-9) & np.isfinite(self.raw_ref)
+        na = self.n_axles
+        out_of_apply = (obs[:, self.valve_cols] < 1.0 - 1e-6).any(axis=1)
+        band = np.maximum(self.active_slip, self.active_slip_rel * self.raw_ref)
+        slipped = ((self.raw_ref[:, None] - self.prev_wheels) > band[:, None]).any(axis=1)
+        demand = obs[:, 4 * na] > 0.0
+        known = np.isfinite(self.raw_ref)  # not the stop's first observation
+        anchored = known & (age == 0.0) & (out_of_apply | slipped) & demand
         span = np.maximum(self.since_anchor, dt)  # the estimator's time since its last anchor
         jump = self.raw_ref - self.raw_decel * dt - v_ref
         learned = np.where(span >= K.ACC_LEARN_MIN_SPAN_S - 1e-9, self.learn_gain, 0.0)
@@ -277,11 +305,11 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         self.drift = np.where(anchored & (span >= DRIFT_MIN_SPAN_S - 1e-9), rate, self.drift)
         since = np.where(anchored, 0.0, self.since_anchor)
         self.since_anchor = since + dt  # at the next period's observation
+        self.anchored = anchored
         # the estimator's reference's own fall a second, kept through an anchor
-        self.raw_decel = np.where(
-            anchored | ~np.isfinite(self.raw_ref), self.raw_decel, (self.raw_ref - v_ref) / dt
-        )
+        self.raw_decel = np.where(anchored | ~known, self.raw_decel, (self.raw_ref - v_ref) / dt)
         self.raw_ref = v_ref.copy()
+        self.prev_wheels = v.copy()
         corrected = v_ref - self.drift * since
         return np.maximum(corrected, np.minimum(v.max(axis=1), v_ref))
 
@@ -298,7 +326,7 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         v_ref = obs[:, 4 * na + 1].astype(np.float64) * self.v_scale
         v = obs[:, :na].astype(np.float64) * self.v_scale
         if self.drift_correction:  # the reference the loop tracks (``_correct_drift``)
-            v_ref = self._correct_drift(v_ref, age, v)
+            v_ref = self._correct_drift(obs, v_ref, age, v)
             self.v_ref = v_ref
         slope = (self.prev_ref - v_ref) / dt
         known = np.isfinite(slope) & (age >= self.prev_age)

@@ -195,8 +195,12 @@ def input_spec(policy: SB3Policy) -> dict[str, Any]:
             "max_creep_floor_kmh": MAX_CREEP_FLOOR_KMH,
             # the aided reference less the drift its last anchor showed and the estimator did
             # not learn (rate over at least drift_min_span_s; baselines/slip_target.py)
+            # (the estimator's rule it mirrors: accel_offset_gain of the miss learned at an
+            # anchor at least accel_learn_min_span_s after the last)
             "drift_correction": loop.drift_correction,
             "drift_min_span_s": DRIFT_MIN_SPAN_S,
+            "accel_offset_gain": loop.learn_gain,
+            "accel_learn_min_span_s": K.ACC_LEARN_MIN_SPAN_S,
             "tier": tier,
             "wsp": dataclasses.asdict(loop.cfg),
         }
