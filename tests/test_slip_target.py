@@ -822,3 +822,8 @@ def test_the_drift_correction_needs_the_accelerometer_and_is_off_by_default():
         WSPBrakingEnv(action_mode="slip_target", slip_target_drift_correction=True)
     assert len(str(err.value).splitlines()) == 1
     assert SlipTargetPolicy(2.0, SlipTargetLoop(drift_correction=True)).name.endswith("_drift")
+    from wsp_env.core.config import configs_root
+
+    path = configs_root() / "train" / "ppo_bc_slip_target_drift_accel_uic_z1.yaml"
+    kw = load_train_config(str(path)).env_kwargs
+    assert WSPBrakingVectorEnv(num_envs=1, **kw).core.loop.drift_correction is True
