@@ -73,18 +73,18 @@ what the sensor model measures) — exactly as the classical WSP (``classical.py
   reference only; off by default): the shared estimator dead-reckons on the accelerometer and
   learns the reading's offset (bias and the gradient a specific-force sensor reads) only at an
   anchor at least ``kernel.ACC_LEARN_MIN_SPAN_S`` (2 s) after the last, and then
-  ``accel_offset_gain`` (half) of it. A loop holding a low target can keep it from ever
-  learning: on an uphill leaves stop (+21.4 per mille, bias -0.12 m/s^2, 60 km/h, 1.5 km/h)
-  the reference rises above the train, the target reads as reached with every wheel
-  gripping, the loop vents every axle, every wheel rolls free and the estimator anchors on
-  them 0.5-2 s after the last anchor — too soon to learn — and the cycle repeats to
-  standstill (94 anchors, none 2 s after the last, nothing learned, 301.2 m). With the
-  correction the loop reads each anchor from the observation by the estimator's own rule,
-  reads the anchor's jump of the reference (what it drifted since the last anchor, a rate
-  over the time between them), takes away the share the estimator learned at that anchor,
-  and subtracts the rest times the time since the anchor from the reference it tracks (never
-  below the fastest wheel): 49 anchors, 5 of them 2 s after the last, 0.32 m/s^2 learned,
-  286.7 m (``tests/test_slip_target.py``).
+  ``accel_offset_gain`` (half) of it. A loop holding a low target can keep it from ever learning:
+  on an uphill leaves stop (+21.4 per mille, bias -0.12 m/s^2, 60 km/h, 1.5 km/h) the reference
+  rises above the train, the target reads as reached with every wheel gripping, the loop vents
+  every axle, every wheel rolls free and the estimator anchors on them under 2 s after the last
+  anchor (mostly within 0.5 s, in runs of consecutive periods) — too soon to learn — and the cycle
+  repeats to standstill (94 anchors, none 2 s after the last, nothing learned, 301.2 m). With the
+  correction the loop reads each anchor from the observation by the estimator's own rule, reads
+  the anchor's jump of the reference (what it drifted since the last anchor, a rate over the time
+  between them), takes away the share the estimator learned at that anchor, and subtracts the rest
+  times the time since the anchor from the reference it tracks (never below the fastest wheel): 49
+  anchors, 5 of them 2 s after the last, 0.32 m/s^2 learned, 286.7 m
+  (``tests/test_slip_target.py``).
   ``docs/training.md``, "The slip-target loop's drift correction".
 
 The commands are continuous valve actions (``2 f - 1``), so the loop can drive any continuous
