@@ -265,6 +265,13 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
     # bound once (``bind``); every other array evolves (``state_dict``)
     _CONSTANT = frozenset({"valve_of_axle", "valve_starts", "_rows"})  # and ref_limit, a float
 
+    def _slips(self, v_ref: np.ndarray, wheels: np.ndarray) -> np.ndarray:
+        """Per environment, whether a wheel's reading (m/s) is below the reference (m/s) by more
+        than the estimator's working band, ``max(active_slip, active_slip_rel v_ref)``: the
+        kernel's test that the WSP works (``kernel.estimate_and_supervise``)."""
+        band = np.maximum(self.active_slip, self.active_slip_rel * v_ref)
+        return ((v_ref[:, None] - wheels) > band[:, None]).any(axis=1)
+
     def _correct_drift(
         self, obs: np.ndarray, v_ref: np.ndarray, age: np.ndarray, v: np.ndarray
     ) -> np.ndarray:
@@ -292,8 +299,7 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         dt = self.dt
         na = self.n_axles
         out_of_apply = (obs[:, self.valve_cols] < 1.0 - 1e-6).any(axis=1)
-        band = np.maximum(self.active_slip, self.active_slip_rel * self.raw_ref)
-        slipped = ((self.raw_ref[:, None] - self.prev_wheels) > band[:, None]).any(axis=1)
+        slipped = self._slips(self.raw_ref, self.prev_wheels)  # at the period's start
         demand = obs[:, 4 * na] > 0.0
         known = np.isfinite(self.raw_ref)  # not the stop's first observation
         anchored = known & (age == 0.0) & (out_of_apply | slipped) & demand
@@ -308,8 +314,7 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         self.anchored = anchored
         # the estimator's reference's own fall a second, kept through an anchor
         self.raw_decel = np.where(anchored | ~known, self.raw_decel, (self.raw_ref - v_ref) / dt)
-        self.raw_ref = v_ref.copy()
-        self.prev_wheels = v.copy()
+        self.raw_ref, self.prev_wheels = v_ref, v  # fresh arrays of ``advance``'s
         corrected = v_ref - self.drift * since
         return np.maximum(corrected, np.minimum(v.max(axis=1), v_ref))
 
@@ -336,8 +341,7 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         allowed = None
         if self.release == "working":  # the loop works: it asked for under the demand in the
             # last period, or a wheel slips beyond the estimator's working band now
-            band = np.maximum(self.active_slip, self.active_slip_rel * v_ref)
-            allowed = self.working | ((v_ref[:, None] - v) > band[:, None]).any(axis=1)
+            allowed = self.working | self._slips(v_ref, v)
         rows, axles = self._release_step(age, decel, dt, allowed)
         self.vent[rows, axles] = True
 
