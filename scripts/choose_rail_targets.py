@@ -25,9 +25,10 @@ file was made (gated and capped since 2026-11-27; a file made before the gate na
 runs so, one made between the gate and the creep cap its uncapped runs; a loop other than the
 default is named in the policy's name, ``slip_target_<x>kmh_always``, ``..._creep0``, and
 skipped; ``--loop drift`` reads the targets of the loop with the drift correction,
-``slip_target_<x>kmh_drift``, instead, and skips the default loop's). Files whose loops ran
-on different classical thresholds (``slip_target_loop``: the tier's since 2026-11-27,
-``WSPConfig()``'s defaults before) are not merged.
+``slip_target_<x>kmh_drift``, instead, and skips the default loop's; ``--loop drift-pgain``
+that loop's with the gain scaled by the pressure held, ``..._drift_pgain0.8x0.25``). Files
+whose loops ran on different classical thresholds (``slip_target_loop``: the tier's since
+2026-11-27, ``WSPConfig()``'s defaults before) are not merged.
 
     .venv/bin/python scripts/choose_rail_targets.py runs/s14/regiolis_targets_dev.json \\
         [runs/s14/more_targets_dev.json] [--worst 1.10]
@@ -48,7 +49,12 @@ from ship_criteria import criteria
 from wsp_env.evaluation.benchmark import score
 
 # the loops ``--loop`` reads, by the suffix their runs' names carry (``slip_target.loop_suffix``)
-LOOPS = {"default": "", "drift": "_drift"}
+LOOPS = {
+    "default": "",
+    "drift": "_drift",
+    # the drift correction with the gain scaled by the pressure held (0.8 per km/h, floor 0.25)
+    "drift-pgain": "_drift_pgain0.8x0.25",
+}
 
 
 def target_pattern(loop: str = "default") -> re.Pattern[str]:
@@ -199,8 +205,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("benchmark_json", nargs="+", help="development-stop benchmark files")
     ap.add_argument("--worst", type=float, default=1.10, help="worst stop / classical limit")
     ap.add_argument("--loop", choices=tuple(LOOPS), default="default",
-                    help="whose constant targets: the default loop's or the drift-corrected "
-                         "loop's (slip_target_<x>kmh_drift)")  # fmt: skip
+                    help="whose constant targets: the default loop's, the drift-corrected "
+                         "loop's (slip_target_<x>kmh_drift) or that loop's with the gain "
+                         "scaled by the pressure held (..._drift_pgain0.8x0.25)")  # fmt: skip
     args = ap.parse_args(argv)
     try:
         first, targets = load(args.benchmark_json, args.loop)

@@ -10,8 +10,10 @@ not stopped in the time limit; with ``classical`` among the policies, each other
 worst per-stop ratio of stopping distance to it. ``--policy`` is ``classical`` (the tier's
 frozen classical WSP), ``target:X`` (a constant X km/h target on the slip-target loop of the
 tier, the environment's default loop), ``target:X:drift`` (the same with the loop's drift
-correction, ``wheels+accel`` only) or anything ``wsp-env benchmark --policy`` takes (a model
-file, a shipped policy's name). ``--json`` keeps every run (written whole or not at all).
+correction, ``wheels+accel`` only), ``target:X[:drift]:GxF`` (with the loop's gain G per km/h
+scaled by the pressure held, never below F of it: ``target:2:drift:0.8x0.25``) or anything
+``wsp-env benchmark --policy`` takes (a model file, a shipped policy's name). ``--json`` keeps
+every run (written whole or not at all).
 
     .venv/bin/python scripts/fresh_stops.py --rail leaves --draw 1200 \\
         --policy runs/train/bc_st_cap2_s1/student.zip --policy target:2 --policy classical \\
@@ -29,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from wsp_env.baselines.slip_target import SlipTargetLoop, SlipTargetPolicy
+from wsp_env.baselines.slip_target import SlipTargetLoop, SlipTargetPolicy, parse_pressure_gain
 from wsp_env.core.config import load_vehicle
 from wsp_env.envs import make_core
 from wsp_env.envs.tiers import TIERS, VERSION, benchmark_env_kwargs
@@ -63,13 +65,19 @@ def rail_seeds(vehicle: str, tier: str, rail: str, draw: int) -> list[int]:
 
 
 def build_policy(spec: str, tier: str) -> Any:
-    """``target:X`` as a constant target on the tier's default loop (``target:X:drift``: with
-    the loop's drift correction); anything else as ``wsp-env benchmark --policy`` builds it."""
+    """``target:X`` as a constant target on the tier's default loop, ``target:X:drift`` with
+    the loop's drift correction, ``target:X[:drift]:GxF`` with its gain G per km/h scaled by
+    the pressure held, never below F of it (``slip_target.parse_pressure_gain``); anything else
+    as ``wsp-env benchmark --policy`` builds it."""
     if spec.startswith("target:"):
         value, _, option = spec.removeprefix("target:").partition(":")
-        if option not in ("", "drift"):
-            raise ValueError(f"--policy {spec}: target:X or target:X:drift")
-        if option and tier != "wheels+accel":
+        items = option.split(":") if option else []
+        drift = items[:1] == ["drift"]
+        rest = items[1:] if drift else items
+        if len(rest) > 1 or (rest and "x" not in rest[0]):
+            raise ValueError(f"--policy {spec}: target:X[:drift][:GAINxFLOOR]")
+        gain, floor = parse_pressure_gain(rest[0] if rest else "off", f"--policy {spec}")
+        if drift and tier != "wheels+accel":
             raise ValueError(f"--policy {spec}: the drift correction needs --tier wheels+accel")
         try:
             kmh = float(value)
@@ -78,7 +86,8 @@ def build_policy(spec: str, tier: str) -> Any:
         if not 0.0 <= kmh <= 30.0:
             raise ValueError(f"--policy {spec}: a target in [0, 30] km/h")
         # the bound core's tier's loop
-        return SlipTargetPolicy(kmh, SlipTargetLoop(drift_correction=option == "drift"))
+        loop = SlipTargetLoop(drift_correction=drift, gain_per_kmh=gain, gain_scale_floor=floor)
+        return SlipTargetPolicy(kmh, loop)
     return make_policy(spec, tier=tier)
 
 

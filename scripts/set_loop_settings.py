@@ -1,8 +1,10 @@
 """A copy of a slip-target model file with its loop's later settings set: the periodic
 release's gate (``--release``: ``slip_target_release``, ``working`` or ``always``), the creep
-cap (``--max-creep``: ``slip_target_max_creep``, 0-1, 0 no cap) and the drift correction
-(``--drift-correction on|off``: ``slip_target_drift_correction``, an accelerometer model's;
-docs/environment.md), so that a
+cap (``--max-creep``: ``slip_target_max_creep``, 0-1, 0 no cap), the drift correction
+(``--drift-correction on|off``: ``slip_target_drift_correction``, an accelerometer model's) and
+the gain (``--pressure-gain off|GxF``: ``slip_target_gain_per_kmh`` and
+``slip_target_gain_scale_floor``, off the fixed 0.2 per km/h, GxF G per km/h times the pressure
+held over the demand, never below F of it; docs/environment.md), so that a
 policy trained before a setting existed (which loads with the loop it was made with:
 ``policy.LEGACY_LOOP_SETTINGS``) can be scored with today's loop, or the other way round. The
 copy takes its observation statistics (``STEM.vecnormalize.pkl``) along; nothing else of the
@@ -19,7 +21,7 @@ import shutil
 import sys
 from pathlib import Path
 
-from wsp_env.baselines.slip_target import RELEASE_GATES, check_max_creep
+from wsp_env.baselines.slip_target import RELEASE_GATES, check_max_creep, parse_pressure_gain
 from wsp_env.policy import model_metadata, write_model_metadata
 
 
@@ -55,6 +57,11 @@ def main(argv: list[str] | None = None) -> int:
         choices=("on", "off"),
         help="the loop's correction of the aided reference's drift (accelerometer models)",
     )
+    ap.add_argument(
+        "--pressure-gain",
+        help="the loop's gain: off (a fixed 0.2 per km/h) or GxF (G per km/h times the pressure "
+        "held over the demand, never below F of it, e.g. 0.8x0.25)",
+    )
     args = ap.parse_args(argv)
     try:
         settings: dict = {}
@@ -68,9 +75,14 @@ def main(argv: list[str] | None = None) -> int:
             settings["slip_target_max_creep"] = check_max_creep(value)
         if args.drift_correction is not None:
             settings["slip_target_drift_correction"] = args.drift_correction == "on"
+        if args.pressure_gain is not None:
+            gain, floor = parse_pressure_gain(args.pressure_gain, "--pressure-gain")
+            settings["slip_target_gain_per_kmh"] = gain
+            settings["slip_target_gain_scale_floor"] = floor
         if not settings:
             raise ValueError(
-                "nothing to set: give --release, --max-creep and/or --drift-correction"
+                "nothing to set: give --release, --max-creep, --drift-correction and/or "
+                "--pressure-gain"
             )
         if args.out.suffix != ".zip":
             raise ValueError(f"{args.out}: the copy must be a .zip model file")

@@ -14,7 +14,7 @@ until then: the wheels tier's 2.0 m/s^2 recovery hold and 3 s release interval w
     .venv/bin/python scripts/slip_target_benchmark.py --tier wheels+accel --target 4.25 \\
         [--target 2 --target 6] [--runs 300] [--stops development] [--vehicle regiolis] \\
         [--json runs/bench/slip_constant.json] [--rail-teacher] [--release always] \\
-        [--max-creep 0 --max-creep 0.2] [--drift-correction on]
+        [--max-creep 0 --max-creep 0.2] [--drift-correction on] [--pressure-gain 0.8x0.25]
 
 ``--rail-teacher`` adds ``baselines.oracle.SlipTargetOracle``: the privileged teacher of the
 imitation start (``oracle_target_rail``: each stop's constant target picked by its rail, which
@@ -38,6 +38,7 @@ from wsp_env.baselines.slip_target import (
     SlipTargetLoop,
     SlipTargetPolicy,
     loop_suffix,
+    parse_pressure_gain,
 )
 from wsp_env.cli.printing import print_benchmark
 from wsp_env.evaluation.benchmark import SEALED_RUNS, STOP_SETS, run_benchmark
@@ -78,6 +79,13 @@ def main(argv: list[str] | None = None) -> int:
         "repeatable: each target under each; default off)",
     )
     ap.add_argument(
+        "--pressure-gain",
+        action="append",
+        help="the loop's gain: off (a fixed 0.2 per km/h) or GxF, G per km/h times the pressure "
+        "held over the demand, never below F of it (e.g. 0.8x0.25; repeatable: each target "
+        "under each; default off)",
+    )
+    ap.add_argument(
         "--thresholds",
         choices=("tier", "default"),
         default="tier",
@@ -97,12 +105,19 @@ def main(argv: list[str] | None = None) -> int:
     if any(drifts) and args.tier != "wheels+accel":
         print("--drift-correction on: needs --tier wheels+accel", file=sys.stderr)
         return 2
+    try:
+        gains = [parse_pressure_gain(g, "--pressure-gain") for g in args.pressure_gain or ["off"]]
+    except ValueError as err:
+        print(err, file=sys.stderr)
+        return 2
     loops = [
-        {"release": g, "max_creep": c, "drift_correction": d}
+        {"release": g, "max_creep": c, "drift_correction": d,
+         "gain_per_kmh": gain, "gain_scale_floor": floor}
         for g in args.release or [DEFAULT_RELEASE]
         for c in caps
         for d in drifts
-    ]
+        for gain, floor in gains
+    ]  # fmt: skip
     wsp = load_wsp_config(tier=args.tier) if args.thresholds == "tier" else WSPConfig()
     policies: list = [
         SlipTargetPolicy(t, SlipTargetLoop(wsp, **kw)) for kw in loops for t in targets

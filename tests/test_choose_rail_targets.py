@@ -127,3 +127,11 @@ def test_the_drift_corrected_loops_targets_are_read_apart(tmp_path, capsys):
     })  # fmt: skip
     assert choose_rail_targets.main([only_default, "--loop", "drift"]) == 2
     assert "no slip_target_<x>kmh_drift policy" in capsys.readouterr().err
+    # the drift-corrected loop with the gain scaled by the pressure held: its own names only
+    scaled = bench(tmp_path / "c.json", {
+        "slip_target_2kmh_drift": runs_of([90.0, 90.0, 80.0, 80.0], [-4.5, -4.5, -2.0, -2.0]),
+        "slip_target_2kmh_drift_pgain0.8x0.25": runs_of([90.0] * 4, [-4.5, -4.5, -4.0, -4.0]),
+        "slip_target_3kmh_drift_pgain0.8x0.25": runs_of([95.0] * 4, [-4.6, -4.6, -3.0, -3.0]),
+    })  # fmt: skip
+    assert choose_rail_targets.main([scaled, "--loop", "drift-pgain"]) == 0
+    assert capsys.readouterr().out.rstrip().endswith("leaves: 3\n  wet: 2")

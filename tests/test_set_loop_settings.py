@@ -66,6 +66,17 @@ def test_the_copy_names_the_settings_and_keeps_the_rest(tmp_path, capsys):
     assert set_loop_settings.main([str(old), str(drift), "--drift-correction", "on"]) == 0
     kw = model_metadata(drift)["env_kwargs"]
     assert kw["slip_target_drift_correction"] is True and kw["slip_target_release"] == "always"
+    assert kw["slip_target_gain_scale_floor"] == 1.0  # a file from before it: a fixed gain
+    scaled = tmp_path / "scaled" / "student.zip"
+    assert set_loop_settings.main([str(old), str(scaled), "--pressure-gain", "0.8x0.25"]) == 0
+    kw = model_metadata(scaled)["env_kwargs"]
+    assert (kw["slip_target_gain_per_kmh"], kw["slip_target_gain_scale_floor"]) == (0.8, 0.25)
+    assert kw["slip_target_drift_correction"] is False
+    bad = tmp_path / "bad" / "student.zip"
+    assert set_loop_settings.main([str(old), str(bad), "--pressure-gain", "0.8x0"]) == 2
+    err = capsys.readouterr().err
+    assert "--pressure-gain 0.8x0: slip_target_gain_scale_floor: must be in (0, 1]" in err
+    assert not bad.parent.exists()
 
 
 def test_an_existing_copy_or_a_failed_write_leaves_nothing_new(tmp_path, capsys, monkeypatch):

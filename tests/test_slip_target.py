@@ -298,6 +298,10 @@ def test_gymnasium_and_sb3_checkers_pass_with_memory_features(kwargs):
         ({"slip_target_max_creep": 1.5}, "slip_target_max_creep"),
         ({"slip_target_drift_correction": 1}, "slip_target_drift_correction"),
         ({"slip_target_drift_correction": "yes"}, "slip_target_drift_correction"),
+        ({"slip_target_gain_scale_floor": 0.0}, "slip_target_gain_scale_floor"),
+        ({"slip_target_gain_scale_floor": 1.5}, "slip_target_gain_scale_floor"),
+        ({"slip_target_gain_scale_floor": True}, "slip_target_gain_scale_floor"),
+        ({"slip_target_gain_scale_floor": "half"}, "slip_target_gain_scale_floor"),
     ],
 )
 def test_bad_slip_target_argument_is_one_line(kwargs, name):
@@ -386,6 +390,53 @@ def test_the_creep_cap_asks_for_at_most_its_fraction_of_the_reference():
     assert np.allclose(capped.command(slower, target), want, rtol=0, atol=1e-12)
     low = np.full_like(target, 1.0)
     assert np.array_equal(capped.command(slower, low), free.command(slower, low))
+
+
+def test_the_pressure_scaled_gain_is_the_fixed_gain_at_the_pressure_held():
+    """The scaled gain alone, on hand-made observations (every wheel 3 km/h under the
+    reference at 100 km/h, a 2.75 km/h target: 0.25 km/h over it, so that no request
+    saturates):
+    with the cylinders at a share ``h`` of the demand, the loop of gain 0.8 scaled with the
+    floor 0.25 asks for what a fixed gain of ``0.8 clip(h, 0.25, 1)`` asks for — 0.2 at and
+    under a quarter of the demand, 0.4 at half, 0.8 at the full demand — and the floor 1 is the
+    fixed gain 0.8 whatever the pressure. Each request differs from the next gain's, so a
+    mutation of the scale (or of the clip) fails."""
+    core = make_core(1, action_mode="slip_target")
+    na = core.n_axles
+
+    def loop(gain: float, floor: float = 1.0) -> SlipTargetLoop:
+        out = SlipTargetLoop(gain_per_kmh=gain, gain_scale_floor=floor)
+        out.bind(core)
+        out.reset(np.array([0]))
+        return out
+
+    def obs(hold: float) -> np.ndarray:
+        o = np.zeros((1, core.kernel_obs_dim))
+        v_scale = core.obs_par[K.OP_SPEED_SCALE]
+        o[:, :na] = (100.0 - 3.0) / 3.6 / v_scale
+        o[:, 3 * na : 4 * na] = 0.6 * hold  # / p_max
+        o[:, 4 * na] = 0.6  # the demand / p_max
+        o[:, 4 * na + 1] = 100.0 / 3.6 / v_scale
+        return o
+
+    target = np.full((1, core.n_valves), 2.75)
+    scaled, fixed_08 = loop(0.8, 0.25), loop(0.8, 1.0)
+    assert SlipTargetLoop().gain_scale_floor == 1.0  # a fixed gain by default
+    for hold, gain in ((0.1, 0.2), (0.25, 0.2), (0.5, 0.4), (1.0, 0.8), (1.1, 0.8)):
+        want = loop(gain).command(obs(hold), target)
+        assert np.allclose(scaled.command(obs(hold), target), want, rtol=0, atol=1e-12), hold
+        other = loop(gain + 0.05).command(obs(hold), target)
+        assert not np.allclose(want, other, rtol=0, atol=1e-6)
+        assert np.array_equal(
+            fixed_08.command(obs(hold), target), loop(0.8).command(obs(hold), target)
+        )
+    assert SlipTargetPolicy(2.0, scaled).name == "slip_target_2kmh_pgain0.8x0.25"
+    vec = WSPBrakingVectorEnv(
+        num_envs=2, action_mode="slip_target", slip_target_gain_per_kmh=0.8,
+        slip_target_gain_scale_floor=0.25,
+    )  # fmt: skip
+    assert (vec.core.loop.gain_per_kmh, vec.core.loop.gain_scale_floor) == (0.8, 0.25)
+    assert WSPBrakingEnv(action_mode="slip_target").core.loop.gain_scale_floor == 1.0
 
 
 def test_the_creep_cap_reaches_the_loop_from_every_entry_point():
@@ -519,7 +570,9 @@ def test_training_config_and_trained_model_carry_the_mode(tmp_path):
     assert policy.env_kwargs["slip_target_release"] == "working"
     assert policy.env_kwargs["slip_target_max_creep"] == 0.2
     assert policy.env_kwargs["slip_target_drift_correction"] is False
+    assert policy.env_kwargs["slip_target_gain_scale_floor"] == 1.0
     meta = model_metadata(out / "best_model.zip")
+    del meta["env_kwargs"]["slip_target_gain_scale_floor"]
     del meta["env_kwargs"]["slip_target_drift_correction"]
     assert (
         model_metadata(out / "best_model.zip")["env_kwargs"]["slip_target_drift_correction"]
@@ -535,6 +588,7 @@ def test_training_config_and_trained_model_carry_the_mode(tmp_path):
     kw = model_metadata(old)["env_kwargs"]
     assert (kw["slip_target_release"], kw["slip_target_max_creep"]) == ("working", 0.0)
     assert kw["slip_target_drift_correction"] is False  # a file from before the correction
+    assert kw["slip_target_gain_scale_floor"] == 1.0  # from before the scaled gain: fixed
     del meta["env_kwargs"]["slip_target_release"]
     write_model_metadata(old, meta)
     kw = model_metadata(old)["env_kwargs"]
@@ -584,6 +638,7 @@ def test_training_config_and_trained_model_carry_the_mode(tmp_path):
     assert loop["release"] == "working" and loop["max_creep"] == 0.2
     assert loop["max_creep_floor_kmh"] == 2.0
     assert loop["drift_correction"] is False and loop["drift_min_span_s"] == 0.5
+    assert loop["gain_scale_floor"] == 1.0
     assert (loop["accel_offset_gain"], loop["accel_learn_min_span_s"]) == (0.5, 2.0)
     assert (loop["working_band_kmh"], loop["working_band_rel"]) == pytest.approx((1.04, 0.0606))
     assert loop["wsp"] == dataclasses.asdict(load_wsp_config(tier="wheels"))
@@ -646,6 +701,12 @@ def test_the_constant_target_script_runs_the_environments_loop(monkeypatch):
     ]  # fmt: skip
     assert stb.main(["--target", "3", "--thresholds", "default"]) == 0
     assert seen[-1][0].loop.cfg == WSPConfig()
+    argv = ["--target", "2", "--pressure-gain", "off", "--pressure-gain", "0.8x0.25"]
+    assert stb.main(argv) == 0
+    loops = [(p.loop.gain_per_kmh, p.loop.gain_scale_floor) for p in seen[-1]]
+    assert loops == [(0.2, 1.0), (0.8, 0.25)]
+    assert seen[-1][1].name == "slip_target_2kmh_pgain0.8x0.25"
+    assert stb.main(["--target", "2", "--pressure-gain", "0.8"]) == 2
 
 
 def test_a_loop_built_without_thresholds_takes_its_cores_tier():

@@ -249,6 +249,7 @@ num_envs=N, **kwargs)``:
 | ``slip_target_release`` | str | ``"working"`` | slip-target mode: when the inner loop's periodic release may begin: ``working``, only while the loop works (some axle asked for under the full demand in the last period, or a wheel's measured slip is beyond the estimator's working band), as the classical WSP; ``always``, whenever the reference's age allows (the loop before 2026-11-27; a policy file that does not name it loads with it) |
 | ``slip_target_max_creep`` | float | ``0.2`` | slip-target mode: each target at most this fraction of the reference speed, or 2 km/h where that is more (a lower target is kept; a target fixed in km/h grows into a near-lock as the train slows), [0, 1]; 0: no cap (the loop before 2026-11-27's cap; a policy file that does not name it loads with 0) |
 | ``slip_target_drift_correction`` | bool | ``False`` | slip-target mode, ``wheels+accel`` tier (an error without the accelerometer): the loop tracks the slip against the aided reference less the drift its last anchor showed and the estimator did not learn (``baselines/slip_target.py``; docs/training.md, "The slip-target loop's drift correction"); a policy file that does not name it loads with ``False`` |
+| ``slip_target_gain_scale_floor`` | float | ``1.0`` | slip-target mode: the loop's gain is ``slip_target_gain_per_kmh`` times the pressure the axle holds over the demand, never below this share of it, (0, 1]; 1: a fixed gain (the loop before 2026-11-28; a policy file that does not name it loads with 1). With 0.25 and a gain of 0.8 per km/h low targets stop about 1 % shorter on leaves and oil, but the valves work harder on soap (73 % more air) and the score falls (docs/training.md, "The slip-target loop's gain scaled by the pressure held") |
 | ``stagger_reset_steps`` | int | ``0`` | vector class only (the single class takes only 0), a training option: ``reset`` advances each environment a random, seeded number of steps below this into a stop, driven by the classical WSP, so that stops do not all end together (``WSPBrakingVectorEnv``'s docstring); 0: off |
 | ``memory_features`` | bool | False | append the memory features (Observation Space): per axle time in the current slide, time since the last release, sliding-energy estimate |
 | ``substep_s`` | float | ``0.001`` | the physics substep (linearly implicit; docs/physics.md) |
@@ -316,6 +317,9 @@ num_envs=N, **kwargs)``:
   slip-target loop may correct the aided reference's drift from its anchors
   (``slip_target_drift_correction=True``, ``wheels+accel`` only). A policy file that does not
   name it loads with ``False``.
+* v3, 2026-11-28, later (no new version, as above; off by default): the slip-target loop's gain
+  may be scaled by the pressure held (``slip_target_gain_scale_floor`` below 1). A policy
+  file that does not name it loads with 1, a fixed gain.
 """
 
 from __future__ import annotations
@@ -333,6 +337,7 @@ from gymnasium.vector.utils import batch_space
 
 from wsp_env.baselines.slip_target import (
     DEFAULT_DRIFT_CORRECTION,
+    DEFAULT_GAIN_SCALE_FLOOR,
     DEFAULT_MAX_CREEP,
     DEFAULT_RELEASE,
 )
@@ -349,12 +354,14 @@ def make_core(n_envs: int, **kwargs: Any) -> BrakingCore:
     (``configs/wsp/classical.yaml``, with ``accelerometer`` ``classical_accel.yaml``) is the
     controller the residual acts on; with ``action_mode="slip_target"`` the slip-target inner
     loop (``baselines.slip_target.SlipTargetLoop``, with ``slip_target_gain_per_kmh``,
-    ``slip_target_lead_s``, ``slip_target_release``, ``slip_target_max_creep`` and
-    ``slip_target_drift_correction``, on the same tier's classical thresholds) tracks the
+    ``slip_target_lead_s``, ``slip_target_release``, ``slip_target_max_creep``,
+    ``slip_target_drift_correction`` and ``slip_target_gain_scale_floor``, on the same tier's
+    classical thresholds) tracks the
     targets."""
     from wsp_env.baselines.slip_target import (
         SlipTargetLoop,
         check_drift_correction,
+        check_gain_scale_floor,
         check_loop_args,
         check_max_creep,
         check_release,
@@ -368,6 +375,9 @@ def make_core(n_envs: int, **kwargs: Any) -> BrakingCore:
     max_creep = check_max_creep(kwargs.pop("slip_target_max_creep", DEFAULT_MAX_CREEP))
     drift = check_drift_correction(
         kwargs.pop("slip_target_drift_correction", DEFAULT_DRIFT_CORRECTION)
+    )
+    floor = check_gain_scale_floor(
+        kwargs.pop("slip_target_gain_scale_floor", DEFAULT_GAIN_SCALE_FLOOR)
     )
     mode = kwargs.get("action_mode")
     if mode in ("residual", "slip_target"):
@@ -384,6 +394,7 @@ def make_core(n_envs: int, **kwargs: Any) -> BrakingCore:
                 release=release,
                 max_creep=max_creep,
                 drift_correction=drift,
+                gain_scale_floor=floor,
             )
             kwargs.setdefault("slip_target_loop", loop)
     return BrakingCore(n_envs, **kwargs)
@@ -463,6 +474,7 @@ class WSPBrakingEnv(gym.Env):
         slip_target_release: str = DEFAULT_RELEASE,
         slip_target_max_creep: float = DEFAULT_MAX_CREEP,
         slip_target_drift_correction: bool = DEFAULT_DRIFT_CORRECTION,
+        slip_target_gain_scale_floor: float = DEFAULT_GAIN_SCALE_FLOOR,
         memory_features: bool = False,
         stagger_reset_steps: int = 0,
     ) -> None:
@@ -490,6 +502,7 @@ class WSPBrakingEnv(gym.Env):
             slip_target_lead_s=slip_target_lead_s, slip_target_release=slip_target_release,
             slip_target_max_creep=slip_target_max_creep,
             slip_target_drift_correction=slip_target_drift_correction,
+            slip_target_gain_scale_floor=slip_target_gain_scale_floor,
             memory_features=memory_features,
         )  # fmt: skip
         self.action_space = self.core.action_space()
@@ -651,6 +664,7 @@ class WSPBrakingVectorEnv(VectorEnv):
         slip_target_release: str = DEFAULT_RELEASE,
         slip_target_max_creep: float = DEFAULT_MAX_CREEP,
         slip_target_drift_correction: bool = DEFAULT_DRIFT_CORRECTION,
+        slip_target_gain_scale_floor: float = DEFAULT_GAIN_SCALE_FLOOR,
         memory_features: bool = False,
         stagger_reset_steps: int = 0,
     ) -> None:
@@ -680,6 +694,7 @@ class WSPBrakingVectorEnv(VectorEnv):
             slip_target_lead_s=slip_target_lead_s, slip_target_release=slip_target_release,
             slip_target_max_creep=slip_target_max_creep,
             slip_target_drift_correction=slip_target_drift_correction,
+            slip_target_gain_scale_floor=slip_target_gain_scale_floor,
             memory_features=memory_features,
         )  # fmt: skip
         self.num_envs = num_envs

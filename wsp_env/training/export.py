@@ -201,6 +201,8 @@ def input_spec(policy: SB3Policy) -> dict[str, Any]:
             "drift_min_span_s": DRIFT_MIN_SPAN_S,
             "accel_offset_gain": loop.learn_gain,
             "accel_learn_min_span_s": K.ACC_LEARN_MIN_SPAN_S,
+            # the gain times clip(p / p_d, gain_scale_floor, 1) (1: the fixed gain_per_kmh)
+            "gain_scale_floor": loop.gain_scale_floor,
             "tier": tier,
             "wsp": dataclasses.asdict(loop.cfg),
         }
