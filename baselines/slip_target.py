@@ -96,7 +96,7 @@ what the sensor model measures) — exactly as the classical WSP (``classical.py
   the anchor's jump of the reference (what it drifted since the last anchor, a rate over the time
   between them), takes away the share the estimator learned at that anchor, and subtracts the rest
   times the time since the anchor from the reference it tracks (never below the fastest wheel): 49
-  anchors, 5 of them 2 s after the last, 0.32 m/s^2 learned, 286.7 m
+  anchors, 5 of them 2 s after the last, 0.32 m/s^2 learned, 286.0 m
   (``tests/test_slip_target.py``).
   ``docs/training.md``, "The slip-target loop's drift correction".
 
@@ -370,9 +370,10 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         na, dt = self.n_axles, self.dt
         decel = obs[:, na : 2 * na].astype(np.float64) * self.a_scale
         age = obs[:, self.age_index].astype(np.float64) * self.age_scale
-        # the reference's deceleration over the period: kept through a re-anchor (its age fell:
-        # the reference jumped to a wheel, up or down, which is no deceleration of the train)
-        # and within [0, the estimator's limit] (what a braking train does)
+        # the reference's deceleration over the period: kept through a re-anchor (its age fell,
+        # or with the drift correction the anchor it reads: the reference jumped to a wheel, up
+        # or down, which is no deceleration of the train) and within [0, the estimator's
+        # limit] (what a braking train does)
         v_ref = obs[:, 4 * na + 1].astype(np.float64) * self.v_scale
         v = obs[:, :na].astype(np.float64) * self.v_scale
         if self.drift_correction:  # the reference the loop tracks (``_correct_drift``)
@@ -380,6 +381,9 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
             self.v_ref = v_ref
         slope = (self.prev_ref - v_ref) / dt
         known = np.isfinite(slope) & (age >= self.prev_age)
+        if self.drift_correction:  # the anchors read exactly (``_correct_drift``): an anchor
+            # in a period after an anchor or an idle spell leaves the age at 0, not falling
+            known &= ~self.anchored
         self.decel_ref = np.where(known, np.clip(slope, 0.0, self.ref_limit), self.decel_ref)
         self.prev_ref, self.prev_age = v_ref, age
         self.vent[...] = False

@@ -823,6 +823,33 @@ def test_the_drift_correction_tracks_the_train_through_anchors_the_estimator_lea
     assert np.max(raw_errors) > 0.29  # the control: the estimator's reference drifted 0.3 m/s
 
 
+def test_the_corrected_loop_keeps_its_reference_deceleration_through_consecutive_anchors():
+    """The lead's reference deceleration (``decel_ref``) is the reference's fall a period, held
+    through an anchor, where the reference jumps to a wheel. An anchor after an anchor leaves
+    the age at 0 (not falling), which the loop without the drift correction cannot tell from
+    a period of dead reckoning: a 0.1 m/s jump there reads as 5.5 m/s^2 and is clipped to the
+    estimator's limit. With the correction the loop reads its anchors exactly (``anchored``)
+    and holds the train's 0.5 m/s^2 through both; the control, without it, does not."""
+    core = make_core(1, accelerometer=True)
+    held = {}
+    for drift in (True, False):
+        loop = SlipTargetLoop(load_wsp_config(tier="wheels+accel"), drift_correction=drift)
+        loop.bind(core)
+        loop.reset(np.array([0]))
+        dt, age, trace = core.sim.control_period_s, 0.0, []
+        for k in range(40):
+            v = 30.0 - 0.5 * k * dt
+            ref = v - 0.1 if k >= 31 else v  # at 31 the reference anchors on a slower wheel
+            age = 0.0 if k in (30, 31) else age + dt
+            wheels = np.full(core.n_axles, v - 0.3)
+            loop.advance(_drift_obs(core, wheels, ref, age, 0.0))  # every valve out of apply
+            trace.append(float(loop.decel_ref[0]))
+        held[drift] = trace
+    assert np.allclose(held[True][1:], 0.5, atol=2e-3)  # float32 speeds over 20 ms
+    assert held[False][31] == core.obs_par[K.OP_REF_DECEL_LIMIT]  # the blind spot, read as a fall
+    assert np.allclose(held[False][32:], 0.5, atol=2e-3)
+
+
 OPTS_UPHILL_LEAVES = {
     "rail": "leaves", "mu_contaminated": 0.041, "speed_kmh": 60.0, "pattern": "uniform",
     "gradient_permille": 21.4, "accelerometer_bias_mps2": -0.12,
@@ -863,7 +890,7 @@ def test_the_drift_correction_ends_the_anchor_cycle_of_a_low_target_uphill():
     wheels gripping, the loop vents every axle, they roll free and the estimator anchors
     before 2 s have passed, too soon to learn the offset: 94 anchors, none 2 s after the last,
     nothing learned, 301.2 m (measured). With it: 49 anchors, 5 of them 2 s or more after the
-    last, 0.32 m/s^2 learned, 286.7 m; and the loop reads every one of the estimator's anchors
+    last, 0.32 m/s^2 learned, 286.0 m; and the loop reads every one of the estimator's anchors
     from the observation, period by period."""
     plain, plain_spans, plain_learned, _ = _uphill_leaves_stop(False)
     fixed, fixed_spans, fixed_learned, misread = _uphill_leaves_stop(True)
