@@ -132,6 +132,7 @@ RELEASE_GATES = ("working", "always")
 DEFAULT_RELEASE = "working"
 DEFAULT_MAX_CREEP = 0.2
 DEFAULT_DRIFT_CORRECTION = False
+DEFAULT_GAIN_PER_KMH = 0.2  # the loop's fixed gain by default
 # the gain's scale never falls below this (``gain_scale_floor``); 1: a fixed gain (the default)
 DEFAULT_GAIN_SCALE_FLOOR = 1.0
 # the drift correction reads a rate from an anchor's jump only over at least this long (s)
@@ -162,14 +163,11 @@ def check_gain_scale_floor(floor: Any) -> float:
     return check_number(floor, "slip_target_gain_scale_floor", gt=0.0, le=1.0)
 
 
-DEFAULT_GAIN_PER_KMH = 0.2  # the loop's fixed gain by default (``SlipTargetLoop``)
-
-
 def parse_pressure_gain(text: str, where: str) -> tuple[float, float]:
     """A command line's gain setting as the loop's ``(gain_per_kmh, gain_scale_floor)``:
     ``off``, the fixed default gain; ``GxF``, G per km/h times the pressure held over the
-    demand, never below F of it (``0.8x0.25``); else a one-line ``ValueError`` naming
-    ``where`` (the option)."""
+    demand, never below F of it (``0.8x0.25``); else a one-line ``ValueError`` beginning with
+    ``where`` (the option and its value)."""
     if text == "off":
         return DEFAULT_GAIN_PER_KMH, DEFAULT_GAIN_SCALE_FLOOR
     gain, sep, floor = text.partition("x")
@@ -178,7 +176,7 @@ def parse_pressure_gain(text: str, where: str) -> tuple[float, float]:
     try:
         return check_loop_args(gain, 0.1)[0], check_gain_scale_floor(floor)
     except ConfigError as err:
-        raise ValueError(f"{where} {text}: {err}") from None
+        raise ValueError(f"{where}: {err}") from None
 
 
 def check_drift_correction(drift_correction: Any) -> bool:
@@ -441,13 +439,15 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
 def loop_suffix(loop: SlipTargetLoop) -> str:
     """What a policy's name adds for a loop whose settings are not the defaults:
     ``_<release>`` for the gate, ``_creep<x>`` for the cap, ``_drift`` for the drift correction,
-    ``_pgain<gain>x<floor>`` for a gain scaled by the pressure held (``""`` for the default
-    loop)."""
+    ``_pgain<gain>x<floor>`` for a gain scaled by the pressure held, ``_gain<gain>`` for another
+    fixed gain (``""`` for the default loop), so that two loops never share a name."""
     gate = "" if loop.release == DEFAULT_RELEASE else f"_{loop.release}"
     cap = "" if loop.max_creep == DEFAULT_MAX_CREEP else f"_creep{loop.max_creep:g}"
     scaled = ""
     if loop.gain_scale_floor != DEFAULT_GAIN_SCALE_FLOOR:
         scaled = f"_pgain{loop.gain_per_kmh:g}x{loop.gain_scale_floor:g}"
+    elif loop.gain_per_kmh != DEFAULT_GAIN_PER_KMH:
+        scaled = f"_gain{loop.gain_per_kmh:g}"
     return gate + cap + ("_drift" if loop.drift_correction else "") + scaled
 
 

@@ -59,7 +59,7 @@ LOOPS = {
 
 def target_pattern(loop: str = "default") -> re.Pattern[str]:
     """The names of one loop's constant targets (``LOOPS``), the km/h as the first group."""
-    return re.compile(rf"^slip_target_(\d+(?:\.\d+)?)kmh{LOOPS[loop]}$")
+    return re.compile(rf"^slip_target_(\d+(?:\.\d+)?)kmh{re.escape(LOOPS[loop])}$")
 
 
 def by_stop(rows: list[dict]) -> dict[tuple, dict]:

@@ -76,7 +76,9 @@ def main(argv: list[str] | None = None) -> int:
         if args.drift_correction is not None:
             settings["slip_target_drift_correction"] = args.drift_correction == "on"
         if args.pressure_gain is not None:
-            gain, floor = parse_pressure_gain(args.pressure_gain, "--pressure-gain")
+            gain, floor = parse_pressure_gain(
+                args.pressure_gain, f"--pressure-gain {args.pressure_gain}"
+            )
             settings["slip_target_gain_per_kmh"] = gain
             settings["slip_target_gain_scale_floor"] = floor
         if not settings:

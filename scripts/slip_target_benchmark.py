@@ -106,7 +106,9 @@ def main(argv: list[str] | None = None) -> int:
         print("--drift-correction on: needs --tier wheels+accel", file=sys.stderr)
         return 2
     try:
-        gains = [parse_pressure_gain(g, "--pressure-gain") for g in args.pressure_gain or ["off"]]
+        gains = [
+            parse_pressure_gain(g, f"--pressure-gain {g}") for g in args.pressure_gain or ["off"]
+        ]
     except ValueError as err:
         print(err, file=sys.stderr)
         return 2

@@ -427,10 +427,16 @@ def test_the_pressure_scaled_gain_is_the_fixed_gain_at_the_pressure_held():
         assert np.allclose(scaled.command(obs(hold), target), want, rtol=0, atol=1e-12), hold
         other = loop(gain + 0.05).command(obs(hold), target)
         assert not np.allclose(want, other, rtol=0, atol=1e-6)
-        assert np.array_equal(
-            fixed_08.command(obs(hold), target), loop(0.8).command(obs(hold), target)
-        )
+        # the floor 1: the fixed gain whatever the pressure, hold + 0.8 (2.75 - 3) of the demand
+        want_fixed = 2.0 * np.clip(hold + 0.8 * (2.75 - 3.0), 0.0, 1.0) - 1.0
+        assert np.allclose(fixed_08.command(obs(hold), target), want_fixed, rtol=0, atol=1e-9)
     assert SlipTargetPolicy(2.0, scaled).name == "slip_target_2kmh_pgain0.8x0.25"
+    # every loop its own name (a benchmark file keys its runs by name): the floor 1 with another
+    # gain is another fixed gain, named so; the default loop's name is unchanged
+    names = {SlipTargetPolicy(2.0, lp).name for lp in (scaled, fixed_08, SlipTargetLoop())}
+    assert names == {
+        "slip_target_2kmh_pgain0.8x0.25", "slip_target_2kmh_gain0.8", "slip_target_2kmh",
+    }  # fmt: skip
     vec = WSPBrakingVectorEnv(
         num_envs=2, action_mode="slip_target", slip_target_gain_per_kmh=0.8,
         slip_target_gain_scale_floor=0.25,

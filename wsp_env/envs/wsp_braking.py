@@ -320,6 +320,11 @@ num_envs=N, **kwargs)``:
 * v3, 2026-11-28, later (no new version, as above; off by default): the slip-target loop's gain
   may be scaled by the pressure held (``slip_target_gain_scale_floor`` below 1). A policy
   file that does not name it loads with 1, a fixed gain.
+* v3, 2026-11-28, later still (no new version; only the drift-corrected loop changes): with
+  ``slip_target_drift_correction`` the loop holds its reference deceleration (the lead term's)
+  through every anchor it reads, where before an anchor right after another read as a fall.
+  The few model files made with the correction before it load with the mended loop (constant
+  targets on the development stops moved by at most −0.0004 in score, paired).
 """
 
 from __future__ import annotations
@@ -337,6 +342,7 @@ from gymnasium.vector.utils import batch_space
 
 from wsp_env.baselines.slip_target import (
     DEFAULT_DRIFT_CORRECTION,
+    DEFAULT_GAIN_PER_KMH,
     DEFAULT_GAIN_SCALE_FLOOR,
     DEFAULT_MAX_CREEP,
     DEFAULT_RELEASE,
@@ -369,7 +375,8 @@ def make_core(n_envs: int, **kwargs: Any) -> BrakingCore:
 
     # the loop's own arguments: checked in every mode (as residual_scale is), used in one
     gain, lead = check_loop_args(
-        kwargs.pop("slip_target_gain_per_kmh", 0.2), kwargs.pop("slip_target_lead_s", 0.1)
+        kwargs.pop("slip_target_gain_per_kmh", DEFAULT_GAIN_PER_KMH),
+        kwargs.pop("slip_target_lead_s", 0.1),
     )
     release = check_release(kwargs.pop("slip_target_release", DEFAULT_RELEASE))
     max_creep = check_max_creep(kwargs.pop("slip_target_max_creep", DEFAULT_MAX_CREEP))
@@ -469,7 +476,7 @@ class WSPBrakingEnv(gym.Env):
         action_repeat: int = 1,
         slip_target_min_kmh: float = 0.5,
         slip_target_max_kmh: float = 8.0,
-        slip_target_gain_per_kmh: float = 0.2,
+        slip_target_gain_per_kmh: float = DEFAULT_GAIN_PER_KMH,
         slip_target_lead_s: float = 0.1,
         slip_target_release: str = DEFAULT_RELEASE,
         slip_target_max_creep: float = DEFAULT_MAX_CREEP,
@@ -659,7 +666,7 @@ class WSPBrakingVectorEnv(VectorEnv):
         action_repeat: int = 1,
         slip_target_min_kmh: float = 0.5,
         slip_target_max_kmh: float = 8.0,
-        slip_target_gain_per_kmh: float = 0.2,
+        slip_target_gain_per_kmh: float = DEFAULT_GAIN_PER_KMH,
         slip_target_lead_s: float = 0.1,
         slip_target_release: str = DEFAULT_RELEASE,
         slip_target_max_creep: float = DEFAULT_MAX_CREEP,
