@@ -5,9 +5,10 @@ The stops are those whose rail is ``--rail`` among the seeds ``FRESH_SEED_BASE +
 ``i < --draw`` (9,800,000 + i: no sealed, development, fine-tune pool or suite stop), drawn
 with the benchmark's scenario, sensors and watchdog of ``--vehicle`` and ``--tier``
 (``benchmark_env_kwargs``), every policy on the same stops through the benchmark's runner. Per
-policy: the stops with a watchdog intervention, the longest lock and its stop, and the stops
-not stopped in the time limit; with ``classical`` among the policies, each other's mean and
-worst per-stop ratio of stopping distance to it. ``--policy`` is ``classical`` (the tier's
+policy: the stops with a watchdog intervention, the longest lock and its stop, the stops not
+stopped in the time limit, and the mean return, air and sliding energy a stop; with
+``classical`` among the policies, each other's mean and worst per-stop ratio of stopping
+distance to it. ``--policy`` is ``classical`` (the tier's
 frozen classical WSP), ``target:X`` (a constant X km/h target on the slip-target loop of the
 tier, the environment's default loop), ``target:X:drift`` (the same with the loop's drift
 correction, ``wheels+accel`` only), ``target:X[:drift]:GxF`` (with the loop's gain G per km/h
@@ -105,9 +106,10 @@ def run(vehicle: str, tier: str, seeds: list[int], specs: list[str]) -> dict[str
 
 
 def summary(results: list[dict], classical: list[dict] | None = None) -> dict[str, Any]:
-    """A policy's watchdog stops, longest lock (and its stop) and stops not stopped; with the
-    classical WSP's runs of the same stops, the mean and worst per-stop ratio of stopping
-    distance to it (and the worst's stop)."""
+    """A policy's watchdog stops, longest lock (and its stop), stops not stopped, and its mean
+    return, air and sliding energy a stop (what the score and item 6 weigh beside the
+    distance); with the classical WSP's runs of the same stops, the mean and worst per-stop
+    ratio of stopping distance to it (and the worst's stop)."""
     longest = max(results, key=lambda r: r["max_lock_s"])
     ratios = {}
     if classical is not None:
@@ -126,6 +128,9 @@ def summary(results: list[dict], classical: list[dict] | None = None) -> dict[st
         "longest_lock_s": float(longest["max_lock_s"]),
         "longest_lock_stop": longest["scenario"],
         "not_stopped": [r["scenario"] for r in results if not r["stopped"]],
+        "return_mean": float(np.mean([r["return"] for r in results])),
+        "air_litres_mean": float(np.mean([r["air_litres"] for r in results])),
+        "sliding_energy_kJ_mean": float(np.mean([r["sliding_energy_kJ"] for r in results])),
         **ratios,
     }
 
@@ -167,7 +172,9 @@ def main(argv: list[str] | None = None) -> int:
                  if classical is not None and spec != "classical" else "")  # fmt: skip
         print(f"{spec}: watchdog on {len(wd)} ({', '.join(wd[:8])}{' ...' if len(wd) > 8 else ''}"
               f"), longest lock {s['longest_lock_s']:.2f} s ({s['longest_lock_stop']}), "
-              f"not stopped {len(s['not_stopped'])}{ratio}")  # fmt: skip
+              f"not stopped {len(s['not_stopped'])}{ratio}; a stop: return "
+              f"{s['return_mean']:.3f}, air {s['air_litres_mean']:.0f} l, sliding energy "
+              f"{s['sliding_energy_kJ_mean']:.0f} kJ")  # fmt: skip
     if args.json_path:
         path = Path(args.json_path)
         path.parent.mkdir(parents=True, exist_ok=True)

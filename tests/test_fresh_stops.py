@@ -43,7 +43,14 @@ def test_stops_of_one_rail_run_under_every_policy(tmp_path, capsys):
         s = data["summary"][spec]
         assert s["stops"] == len(seeds)
         assert s["longest_lock_s"] == max(r["max_lock_s"] for r in runs)
-    assert f"{len(seeds)} dry stops among seeds" in capsys.readouterr().out
+        for key, field in (("return_mean", "return"), ("air_litres_mean", "air_litres"),
+                           ("sliding_energy_kJ_mean", "sliding_energy_kJ")):  # fmt: skip
+            want = sum(r[field] for r in runs) / len(runs)
+            assert s[key] == pytest.approx(want, rel=1e-12), key
+    assert data["summary"]["target:3"]["air_litres_mean"] != s["air_litres_mean"]
+    printed = capsys.readouterr().out
+    assert f"{len(seeds)} dry stops among seeds" in printed
+    assert f"air {s['air_litres_mean']:.0f} l" in printed
     # each policy's per-stop ratios to the classical WSP's runs of the same stops
     mine = [r["stopping_distance_m"] for r in data["run_results"]["target:3"]]
     base = [r["stopping_distance_m"] for r in data["run_results"]["classical"]]
