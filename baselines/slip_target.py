@@ -12,7 +12,8 @@ what the sensor model measures) — exactly as the classical WSP (``classical.py
 * a lead on the measured slip's rate: ``s_hat_i = s_i + lead_s (d_i - d_ref)``, ``d_i`` the
   wheel's measured deceleration over the last period (m/s^2), ``d_ref`` the reference speed's
   (its fall over the period, in the loop's state: kept through a re-anchor, where the reference
-  jumps to a wheel, and held within [0, the estimator's deceleration limit]), so the slip
+  jumps to a wheel — told by the reference's age falling, or with the drift correction by the
+  anchors it reads — and held within [0, the estimator's deceleration limit]), so the slip
   ``lead_s`` ahead if it goes on growing as it did. A slip held steady has no lead term, so the
   loop settles on the target itself: the median measured slip mid-stop is 3.85-3.98 km/h for a
   4 km/h target on soap (0.07 at 120 km/h, 0.05 at 160, 0.08 at 60; 1.75-1.95 for 2 km/h,
