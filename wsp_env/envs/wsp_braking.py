@@ -362,8 +362,7 @@ def make_core(n_envs: int, **kwargs: Any) -> BrakingCore:
     loop (``baselines.slip_target.SlipTargetLoop``, with ``slip_target_gain_per_kmh``,
     ``slip_target_lead_s``, ``slip_target_release``, ``slip_target_max_creep``,
     ``slip_target_drift_correction`` and ``slip_target_gain_scale_floor``, on the same tier's
-    classical thresholds) tracks the
-    targets."""
+    classical thresholds) tracks the targets."""
     from wsp_env.baselines.slip_target import (
         SlipTargetLoop,
         check_drift_correction,
