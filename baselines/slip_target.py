@@ -136,8 +136,12 @@ DEFAULT_DRIFT_CORRECTION = False
 DEFAULT_GAIN_PER_KMH = 0.2  # the loop's fixed gain by default
 # the gain's scale never falls below this (``gain_scale_floor``); 1: a fixed gain (the default)
 DEFAULT_GAIN_SCALE_FLOOR = 1.0
+DEFAULT_ONSET_DRIFT = False
 # the drift correction reads a rate from an anchor's jump only over at least this long (s)
 DRIFT_MIN_SPAN_S = 0.5
+# the onset reading (``onset_drift``) needs every cylinder under its brake's threshold for at
+# least this long (s)
+ONSET_MIN_S = 0.2
 # the creep cap never asks for less than this (km/h of measured slip; a lower target is kept)
 MAX_CREEP_FLOOR_KMH = 2.0
 
@@ -178,6 +182,20 @@ def parse_pressure_gain(text: str, where: str) -> tuple[float, float]:
         return check_loop_args(gain, 0.1)[0], check_gain_scale_floor(floor)
     except ConfigError as err:
         raise ValueError(f"{where}: {err}") from None
+
+
+def check_onset_drift(onset_drift: Any, drift_correction: bool) -> bool:
+    """The onset reading's switch as a bool, or a one-line ``ConfigError`` naming the
+    environment argument ``slip_target_onset_drift`` (true or false; true only with the drift
+    correction, whose drift it sets)."""
+    if not isinstance(onset_drift, (bool, np.bool_)):
+        raise ConfigError(f"slip_target_onset_drift: must be true or false, got {onset_drift!r}")
+    if onset_drift and not drift_correction:
+        raise ConfigError(
+            "slip_target_onset_drift: needs slip_target_drift_correction (it sets the drift "
+            "the correction takes away)"
+        )
+    return bool(onset_drift)
 
 
 def check_drift_correction(drift_correction: Any) -> bool:
@@ -232,6 +250,7 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         max_creep: float = DEFAULT_MAX_CREEP,
         drift_correction: bool = DEFAULT_DRIFT_CORRECTION,
         gain_scale_floor: float = DEFAULT_GAIN_SCALE_FLOOR,
+        onset_drift: bool = DEFAULT_ONSET_DRIFT,
     ) -> None:
         self.wsp_given = wsp  # None: the bound core's tier's thresholds (``bind``)
         self.cfg = wsp or WSPConfig()
@@ -240,6 +259,7 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         self.max_creep = check_max_creep(max_creep)
         self.drift_correction = check_drift_correction(drift_correction)
         self.gain_scale_floor = check_gain_scale_floor(gain_scale_floor)
+        self.onset_drift = check_onset_drift(onset_drift, self.drift_correction)
 
     def bind(self, core: Any) -> None:
         """Attach to a ``BrakingCore``: its scales, valve map and batch size."""
@@ -290,6 +310,22 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         self.since_anchor = np.zeros(n)
         self.drift = np.zeros(n)
         self.anchored = np.zeros(n, dtype=bool)  # the estimator anchored in the last period
+        # a rate read from an anchor's jump since the stop began (the onset reading yields)
+        self.rate_read = np.zeros(n, dtype=bool)
+        # the onset reading (``onset_drift``): the accelerometer's reading column, each axle's
+        # brake threshold as a share of the full pressure (design data: no brake torque below
+        # it), and per environment whether the window is open, its periods, the readings'
+        # sum, the wheels' mean speed at its start and now (m/s)
+        self.acc_index = core.kernel_obs_dim - 2
+        # (the vehicle's brake data; the observation's share is of the stop's full pressure,
+        # the vehicle's at most, so a share under this is under the threshold)
+        brake = core.vehicle.brake
+        self.free_share = np.full(na, brake.linear_torque()[1] / brake.p_max_bar)
+        self.onset_open = np.ones(n, dtype=bool)
+        self.onset_n = np.zeros(n)
+        self.onset_acc = np.zeros(n)
+        self.onset_v0 = np.full(n, np.nan)
+        self.onset_v = np.zeros(n)
 
     def reset(self, env_ids: np.ndarray) -> None:
         """Environments ``env_ids`` start a new stop."""
@@ -305,9 +341,15 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         self.anchored[env_ids] = False
         self.since_anchor[env_ids] = 0.0
         self.drift[env_ids] = 0.0
+        self.rate_read[env_ids] = False
+        self.onset_open[env_ids] = True
+        self.onset_n[env_ids] = 0.0
+        self.onset_acc[env_ids] = 0.0
+        self.onset_v0[env_ids] = np.nan
+        self.onset_v[env_ids] = 0.0
 
     # bound once (``bind``); every other array evolves (``state_dict``)
-    _CONSTANT = frozenset({"valve_of_axle", "valve_starts", "_rows"})  # and ref_limit, a float
+    _CONSTANT = frozenset({"valve_of_axle", "valve_starts", "_rows", "free_share"})
 
     def _slips(self, v_ref: np.ndarray, wheels: np.ndarray) -> np.ndarray:
         """Per environment, whether a wheel's reading (m/s) is below the reference (m/s) by more
@@ -352,7 +394,9 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         learned = np.where(span >= K.ACC_LEARN_MIN_SPAN_S - 1e-9, self.learn_gain, 0.0)
         rate = np.clip((1.0 - learned) * jump / span, -K.ACC_CORR_MAX, K.ACC_CORR_MAX)
         # a jump over a short span is mostly the wheels' noise and scale errors over it: kept
-        self.drift = np.where(anchored & (span >= DRIFT_MIN_SPAN_S - 1e-9), rate, self.drift)
+        read = anchored & (span >= DRIFT_MIN_SPAN_S - 1e-9)
+        self.drift = np.where(read, rate, self.drift)
+        self.rate_read |= read
         since = np.where(anchored, 0.0, self.since_anchor)
         self.since_anchor = since + dt  # at the next period's observation
         self.anchored = anchored
@@ -361,6 +405,37 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         self.raw_ref, self.prev_wheels = v_ref, v  # fresh arrays of ``advance``'s
         corrected = v_ref - self.drift * since
         return np.maximum(corrected, np.minimum(v.max(axis=1), v_ref))
+
+    def _read_onset(self, obs: np.ndarray, v: np.ndarray) -> None:
+        """The onset reading (``onset_drift``; module docstring): while every cylinder is under
+        its brake's threshold since the stop began, every wheel rolls with the train, so the
+        wheels' mean deceleration over that window is the train's, and the accelerometer's mean
+        reading less it is the reading's offset. When the window closes (the first period with
+        a cylinder at or over its threshold), after at least ``ONSET_MIN_S``, and no anchor's
+        jump has been read yet, the drift the correction takes away becomes the rate at which
+        that offset carries the aided reference above the train: ``max(0, wheels' deceleration
+        - reading)``, within ``ACC_CORR_MAX``. Only that sense: a reading of too much
+        deceleration carries the reference down, where the fastest wheel holds it up."""
+        na = self.n_axles
+        share = obs[:, 3 * na : 4 * na].astype(np.float64)  # the full pressure's share
+        free = (share < self.free_share[None, :]).all(axis=1)
+        acc = obs[:, self.acc_index].astype(np.float64) * self.a_scale
+        mean_v = v.mean(axis=1)
+        still = self.onset_open & free
+        first = still & np.isnan(self.onset_v0)
+        more = still & ~first
+        self.onset_v0 = np.where(first, mean_v, self.onset_v0)
+        self.onset_n = np.where(more, self.onset_n + 1.0, self.onset_n)
+        self.onset_acc = np.where(more, self.onset_acc + acc, self.onset_acc)
+        self.onset_v = np.where(still, mean_v, self.onset_v)
+        closing = self.onset_open & ~free
+        span = self.onset_n * self.dt
+        use = closing & (span >= ONSET_MIN_S - 1e-9) & ~self.rate_read
+        wheels = (self.onset_v0 - self.onset_v) / np.maximum(span, 1e-9)
+        reading = self.onset_acc / np.maximum(self.onset_n, 1.0)
+        rate = np.clip(wheels - reading, 0.0, K.ACC_CORR_MAX)
+        self.drift = np.where(use, rate, self.drift)
+        self.onset_open &= free
 
     def advance(self, obs: np.ndarray) -> None:
         """One control period of the loop's state on the kernel's observation ``obs``
@@ -375,6 +450,8 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         # limit] (what a braking train does)
         v_ref = obs[:, 4 * na + 1].astype(np.float64) * self.v_scale
         v = obs[:, :na].astype(np.float64) * self.v_scale
+        if self.onset_drift:  # the accelerometer's offset read at the stop's onset
+            self._read_onset(obs, v)
         if self.drift_correction:  # the reference the loop tracks (``_correct_drift``)
             v_ref = self._correct_drift(obs, v_ref, age, v)
             self.v_ref = v_ref
@@ -440,7 +517,8 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
 def loop_suffix(loop: SlipTargetLoop) -> str:
     """What a policy's name adds for a loop whose settings are not the defaults:
     ``_<release>`` for the gate, ``_creep<x>`` for the cap, ``_drift`` for the drift correction,
-    ``_pgain<gain>x<floor>`` for a gain scaled by the pressure held, ``_gain<gain>`` for another
+    ``_onset`` for its onset reading, ``_pgain<gain>x<floor>`` for a gain scaled by the pressure
+    held, ``_gain<gain>`` for another
     fixed gain (``""`` for the default loop), so that two loops never share a name."""
     gate = "" if loop.release == DEFAULT_RELEASE else f"_{loop.release}"
     cap = "" if loop.max_creep == DEFAULT_MAX_CREEP else f"_creep{loop.max_creep:g}"
@@ -449,7 +527,8 @@ def loop_suffix(loop: SlipTargetLoop) -> str:
         scaled = f"_pgain{loop.gain_per_kmh:g}x{loop.gain_scale_floor:g}"
     elif loop.gain_per_kmh != DEFAULT_GAIN_PER_KMH:
         scaled = f"_gain{loop.gain_per_kmh:g}"
-    return gate + cap + ("_drift" if loop.drift_correction else "") + scaled
+    drift = ("_drift" if loop.drift_correction else "") + ("_onset" if loop.onset_drift else "")
+    return gate + cap + drift + scaled
 
 
 class SlipTargetPolicy:

@@ -54,6 +54,8 @@ LOOPS = {
     "drift": "_drift",
     # the drift correction with the gain scaled by the pressure held (0.8 per km/h, floor 0.25)
     "drift-pgain": "_drift_pgain0.8x0.25",
+    # the drift correction with its onset reading of the accelerometer's offset
+    "drift-onset": "_drift_onset",
 }
 
 

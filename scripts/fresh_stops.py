@@ -11,7 +11,8 @@ stopped in the time limit, and the mean return, air and sliding energy a stop; w
 distance to it. ``--policy`` is ``classical`` (the tier's
 frozen classical WSP), ``target:X`` (a constant X km/h target on the slip-target loop of the
 tier, the environment's default loop), ``target:X:drift`` (the same with the loop's drift
-correction, ``wheels+accel`` only), ``target:X[:drift]:GxF`` (with the loop's gain G per km/h
+correction, ``wheels+accel`` only; ``target:X:drift:onset`` with its onset reading of the
+accelerometer's offset), ``target:X[:drift]:GxF`` (with the loop's gain G per km/h
 scaled by the pressure held, never below F of it: ``target:2:drift:0.8x0.25``) or anything
 ``wsp-env benchmark --policy`` takes (a model file, a shipped policy's name). ``--json`` keeps
 every run (written whole or not at all).
@@ -75,8 +76,10 @@ def build_policy(spec: str, tier: str) -> Any:
         items = option.split(":") if option else []
         drift = items[:1] == ["drift"]
         rest = items[1:] if drift else items
+        onset = drift and rest[:1] == ["onset"]
+        rest = rest[1:] if onset else rest
         if len(rest) > 1 or (rest and "x" not in rest[0]):
-            raise ValueError(f"--policy {spec}: target:X[:drift][:GAINxFLOOR]")
+            raise ValueError(f"--policy {spec}: target:X[:drift[:onset]][:GAINxFLOOR]")
         gain, floor = parse_pressure_gain(rest[0] if rest else "off", f"--policy {spec}")
         if drift and tier != "wheels+accel":
             raise ValueError(f"--policy {spec}: the drift correction needs --tier wheels+accel")
@@ -87,7 +90,8 @@ def build_policy(spec: str, tier: str) -> Any:
         if not 0.0 <= kmh <= 30.0:
             raise ValueError(f"--policy {spec}: a target in [0, 30] km/h")
         # the bound core's tier's loop
-        loop = SlipTargetLoop(drift_correction=drift, gain_per_kmh=gain, gain_scale_floor=floor)
+        loop = SlipTargetLoop(drift_correction=drift, gain_per_kmh=gain, gain_scale_floor=floor,
+                              onset_drift=onset)  # fmt: skip
         return SlipTargetPolicy(kmh, loop)
     return make_policy(spec, tier=tier)
 

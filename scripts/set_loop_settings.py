@@ -1,7 +1,8 @@
 """A copy of a slip-target model file with its loop's later settings set: the periodic
 release's gate (``--release``: ``slip_target_release``, ``working`` or ``always``), the creep
 cap (``--max-creep``: ``slip_target_max_creep``, 0-1, 0 no cap), the drift correction
-(``--drift-correction on|off``: ``slip_target_drift_correction``, an accelerometer model's) and
+(``--drift-correction on|off``: ``slip_target_drift_correction``, an accelerometer model's; and
+``--onset-drift on|off``, its onset reading, ``slip_target_onset_drift``) and
 the gain (``--pressure-gain off|GxF``: ``slip_target_gain_per_kmh`` and
 ``slip_target_gain_scale_floor``, off the fixed 0.2 per km/h, GxF G per km/h times the pressure
 held over the demand, never below F of it; docs/environment.md), so that a
@@ -58,6 +59,11 @@ def main(argv: list[str] | None = None) -> int:
         help="the loop's correction of the aided reference's drift (accelerometer models)",
     )
     ap.add_argument(
+        "--onset-drift",
+        choices=("on", "off"),
+        help="the drift-corrected loop's onset reading of the accelerometer's offset",
+    )
+    ap.add_argument(
         "--pressure-gain",
         help="the loop's gain: off (a fixed 0.2 per km/h) or GxF (G per km/h times the pressure "
         "held over the demand, never below F of it, e.g. 0.8x0.25)",
@@ -75,6 +81,8 @@ def main(argv: list[str] | None = None) -> int:
             settings["slip_target_max_creep"] = check_max_creep(value)
         if args.drift_correction is not None:
             settings["slip_target_drift_correction"] = args.drift_correction == "on"
+        if args.onset_drift is not None:
+            settings["slip_target_onset_drift"] = args.onset_drift == "on"
         if args.pressure_gain is not None:
             gain, floor = parse_pressure_gain(
                 args.pressure_gain, f"--pressure-gain {args.pressure_gain}"
@@ -83,8 +91,8 @@ def main(argv: list[str] | None = None) -> int:
             settings["slip_target_gain_scale_floor"] = floor
         if not settings:
             raise ValueError(
-                "nothing to set: give --release, --max-creep, --drift-correction and/or "
-                "--pressure-gain"
+                "nothing to set: give --release, --max-creep, --drift-correction, "
+                "--onset-drift and/or --pressure-gain"
             )
         if args.out.suffix != ".zip":
             raise ValueError(f"{args.out}: the copy must be a .zip model file")
@@ -94,6 +102,14 @@ def main(argv: list[str] | None = None) -> int:
         mode = meta["env_kwargs"].get("action_mode", "continuous")
         if mode != "slip_target":
             raise ValueError(f"{args.model}: not a slip-target model (action_mode {mode!r})")
+        kw_after = {**meta["env_kwargs"], **settings}
+        if kw_after.get("slip_target_onset_drift") and not kw_after.get(
+            "slip_target_drift_correction"
+        ):
+            raise ValueError(
+                f"{args.model}: the onset reading needs the drift correction "
+                "(--drift-correction on)"
+            )
         if settings.get("slip_target_drift_correction") and not meta["env_kwargs"].get(
             "accelerometer"
         ):

@@ -14,7 +14,8 @@ until then: the wheels tier's 2.0 m/s^2 recovery hold and 3 s release interval w
     .venv/bin/python scripts/slip_target_benchmark.py --tier wheels+accel --target 4.25 \\
         [--target 2 --target 6] [--runs 300] [--stops development] [--vehicle regiolis] \\
         [--json runs/bench/slip_constant.json] [--rail-teacher] [--release always] \\
-        [--max-creep 0 --max-creep 0.2] [--drift-correction on] [--pressure-gain 0.8x0.25]
+        [--max-creep 0 --max-creep 0.2] [--drift-correction on [--onset-drift on]] \\
+        [--pressure-gain 0.8x0.25]
 
 ``--rail-teacher`` adds ``baselines.oracle.SlipTargetOracle``: the privileged teacher of the
 imitation start (``oracle_target_rail``: each stop's constant target picked by its rail, which
@@ -79,6 +80,13 @@ def main(argv: list[str] | None = None) -> int:
         "repeatable: each target under each; default off)",
     )
     ap.add_argument(
+        "--onset-drift",
+        action="append",
+        choices=("off", "on"),
+        help="the drift-corrected loop's reading of the accelerometer's offset at the stop's "
+        "onset (needs --drift-correction on; repeatable; default off)",
+    )
+    ap.add_argument(
         "--pressure-gain",
         action="append",
         help="the loop's gain: off (a fixed 0.2 per km/h) or GxF, G per km/h times the pressure "
@@ -102,6 +110,10 @@ def main(argv: list[str] | None = None) -> int:
         print("--max-creep: a fraction of the reference speed in [0, 1]", file=sys.stderr)
         return 2
     drifts = [d == "on" for d in args.drift_correction or ["off"]]
+    onsets = [o == "on" for o in args.onset_drift or ["off"]]
+    if any(onsets) and not all(drifts):
+        print("--onset-drift on: needs --drift-correction on (only)", file=sys.stderr)
+        return 2
     if any(drifts) and args.tier != "wheels+accel":
         print("--drift-correction on: needs --tier wheels+accel", file=sys.stderr)
         return 2
@@ -113,11 +125,12 @@ def main(argv: list[str] | None = None) -> int:
         print(err, file=sys.stderr)
         return 2
     loops = [
-        {"release": g, "max_creep": c, "drift_correction": d,
+        {"release": g, "max_creep": c, "drift_correction": d, "onset_drift": o,
          "gain_per_kmh": gain, "gain_scale_floor": floor}
         for g in args.release or [DEFAULT_RELEASE]
         for c in caps
         for d in drifts
+        for o in onsets
         for gain, floor in gains
     ]  # fmt: skip
     wsp = load_wsp_config(tier=args.tier) if args.thresholds == "tier" else WSPConfig()

@@ -75,11 +75,14 @@ def test_a_target_with_the_drift_correction_runs_the_corrected_loop():
     assert scaled.name == "slip_target_2kmh_drift_pgain0.8x0.25"
     alone = fresh_stops.build_policy("target:2:0.4x0.5", "wheels")
     assert not alone.loop.drift_correction and alone.loop.gain_scale_floor == 0.5
+    onset = fresh_stops.build_policy("target:2:drift:onset", "wheels+accel")
+    assert onset.loop.onset_drift and onset.name == "slip_target_2kmh_drift_onset"
     bad = (
-        ("target:2:drift:0.8", "target:X[:drift][:GAINxFLOOR]"),
+        ("target:2:onset", "target:X[:drift[:onset]][:GAINxFLOOR]"),
+        ("target:2:drift:0.8", "target:X[:drift[:onset]][:GAINxFLOOR]"),
         ("target:2:drift:ax0.25", "slip_target_gain_per_kmh: expected a number"),
         ("target:2:0.8x2", "slip_target_gain_scale_floor: must be in (0, 1]"),
-        ("target:2:drift:0.8x0.25:x", "target:X[:drift][:GAINxFLOOR]"),
+        ("target:2:drift:0.8x0.25:x", "target:X[:drift[:onset]][:GAINxFLOOR]"),
     )
     for spec, words in bad:
         with pytest.raises(ValueError, match=re.escape(words)):
@@ -94,7 +97,7 @@ def test_a_target_with_the_drift_correction_runs_the_corrected_loop():
         (["--rail", "dry", "--policy", "target:40"], "a target in [0, 30] km/h"),
         (["--rail", "dry", "--draw", "0", "--policy", "classical"], "--draw: must be"),
         (["--rail", "dry", "--policy", "no_such_model.zip"], "no_such_model.zip"),
-        (["--rail", "dry", "--policy", "target:2:fast"], "target:X[:drift][:GAINxFLOOR]"),
+        (["--rail", "dry", "--policy", "target:2:fast"], "target:X[:drift[:onset]][:GAINxFLOOR]"),
         (["--rail", "dry", "--tier", "wheels", "--policy", "target:2:drift"], "needs --tier"),
     ],
 )

@@ -77,6 +77,14 @@ def test_the_copy_names_the_settings_and_keeps_the_rest(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "--pressure-gain 0.8x0: slip_target_gain_scale_floor: must be in (0, 1]" in err
     assert not bad.parent.exists()
+    # the onset reading: only on a drift-corrected copy
+    onset = tmp_path / "onset" / "student.zip"
+    assert set_loop_settings.main([str(old), str(onset), "--onset-drift", "on"]) == 2
+    assert "the onset reading needs the drift correction" in capsys.readouterr().err
+    argv = [str(old), str(onset), "--drift-correction", "on", "--onset-drift", "on"]
+    assert set_loop_settings.main(argv) == 0
+    kw = model_metadata(onset)["env_kwargs"]
+    assert kw["slip_target_onset_drift"] is True and kw["slip_target_drift_correction"] is True
 
 
 def test_an_existing_copy_or_a_failed_write_leaves_nothing_new(tmp_path, capsys, monkeypatch):

@@ -22,7 +22,12 @@ from gymnasium.utils.env_checker import check_env
 from test_train import train_config
 
 from wsp_env.baselines.classical import ClassicalWSP, WSPConfig, load_wsp_config
-from wsp_env.baselines.slip_target import MAX_CREEP_FLOOR_KMH, SlipTargetLoop, SlipTargetPolicy
+from wsp_env.baselines.slip_target import (
+    MAX_CREEP_FLOOR_KMH,
+    ONSET_MIN_S,
+    SlipTargetLoop,
+    SlipTargetPolicy,
+)
 from wsp_env.cli import main
 from wsp_env.core import kernel as K
 from wsp_env.envs import WSPBrakingEnv, WSPBrakingVectorEnv, make_core
@@ -577,8 +582,10 @@ def test_training_config_and_trained_model_carry_the_mode(tmp_path):
     assert policy.env_kwargs["slip_target_max_creep"] == 0.2
     assert policy.env_kwargs["slip_target_drift_correction"] is False
     assert policy.env_kwargs["slip_target_gain_scale_floor"] == 1.0
+    assert policy.env_kwargs["slip_target_onset_drift"] is False
     meta = model_metadata(out / "best_model.zip")
     del meta["env_kwargs"]["slip_target_gain_scale_floor"]
+    del meta["env_kwargs"]["slip_target_onset_drift"]
     del meta["env_kwargs"]["slip_target_drift_correction"]
     assert (
         model_metadata(out / "best_model.zip")["env_kwargs"]["slip_target_drift_correction"]
@@ -595,6 +602,7 @@ def test_training_config_and_trained_model_carry_the_mode(tmp_path):
     assert (kw["slip_target_release"], kw["slip_target_max_creep"]) == ("working", 0.0)
     assert kw["slip_target_drift_correction"] is False  # a file from before the correction
     assert kw["slip_target_gain_scale_floor"] == 1.0  # from before the scaled gain: fixed
+    assert kw["slip_target_onset_drift"] is False  # from before the onset reading
     del meta["env_kwargs"]["slip_target_release"]
     write_model_metadata(old, meta)
     kw = model_metadata(old)["env_kwargs"]
@@ -645,6 +653,8 @@ def test_training_config_and_trained_model_carry_the_mode(tmp_path):
     assert loop["max_creep_floor_kmh"] == 2.0
     assert loop["drift_correction"] is False and loop["drift_min_span_s"] == 0.5
     assert loop["gain_scale_floor"] == 1.0
+    assert loop["onset_drift"] is False and loop["onset_min_s"] == 0.2
+    assert loop["onset_free_share"] == pytest.approx([0.174 / 3.8] * 4)
     assert (loop["accel_offset_gain"], loop["accel_learn_min_span_s"]) == (0.5, 2.0)
     assert (loop["working_band_kmh"], loop["working_band_rel"]) == pytest.approx((1.04, 0.0606))
     assert loop["wsp"] == dataclasses.asdict(load_wsp_config(tier="wheels"))
@@ -713,6 +723,11 @@ def test_the_constant_target_script_runs_the_environments_loop(monkeypatch):
     assert loops == [(0.2, 1.0), (0.8, 0.25)]
     assert seen[-1][1].name == "slip_target_2kmh_pgain0.8x0.25"
     assert stb.main(["--target", "2", "--pressure-gain", "0.8"]) == 2
+    argv = ["--target", "2", "--drift-correction", "on", "--onset-drift", "off",
+            "--onset-drift", "on"]  # fmt: skip
+    assert stb.main(argv) == 0
+    assert [p.name for p in seen[-1]] == ["slip_target_2kmh_drift", "slip_target_2kmh_drift_onset"]
+    assert stb.main(["--target", "2", "--onset-drift", "on"]) == 2  # needs the correction
 
 
 def test_a_loop_built_without_thresholds_takes_its_cores_tier():
@@ -854,6 +869,59 @@ def test_the_corrected_loop_keeps_its_reference_deceleration_through_consecutive
     assert np.allclose(held[True][1:], 0.5, atol=2e-3)  # float32 speeds over 20 ms
     assert held[False][31] == core.obs_par[K.OP_REF_DECEL_LIMIT]  # the blind spot, read as a fall
     assert np.allclose(held[False][32:], 0.5, atol=2e-3)
+
+
+def _onset_drift(reading_mps2: float, periods: int, anchor_read_first: bool = False) -> float:
+    """The drift the onset reading sets (m/s a second): a synthetic start, the train coasting
+    at 0.3 m/s^2 with every wheel rolling with it and every cylinder at 0 for ``periods``
+    control periods, the accelerometer reading ``reading_mps2``, then the cylinders over their
+    threshold. ``anchor_read_first``: an anchor's jump was read before the window closed."""
+    core = make_core(1, accelerometer=True)
+    loop = SlipTargetLoop(
+        load_wsp_config(tier="wheels+accel"), drift_correction=True, onset_drift=True
+    )
+    loop.bind(core)
+    loop.reset(np.array([0]))
+    if anchor_read_first:
+        loop.rate_read[0] = True
+    na, dt = core.n_axles, core.sim.control_period_s
+    a_s = core.obs_par[K.OP_DECEL_SCALE]
+    for k in range(periods + 2):
+        v = 30.0 - 0.3 * k * dt
+        obs = _drift_obs(core, np.full(na, v), v, 0.0, 1.0)  # every valve in apply
+        obs[0, 3 * na : 4 * na] = 0.0 if k <= periods else 0.5  # then over the threshold
+        obs[0, core.kernel_obs_dim - 2] = reading_mps2 / a_s
+        loop.advance(obs)
+    return float(loop.drift[0])
+
+
+def test_the_onset_reading_takes_away_the_drift_of_an_accelerometer_reading_too_little():
+    """While every cylinder is under its brake's threshold, the wheels roll with the train: a
+    reading 0.2 m/s^2 under the wheels' 0.3 m/s^2 is an offset that carries the aided reference
+    up at 0.2 m/s a second, which the loop then takes away (float32 speeds: 1e-3); a reading
+    of too much deceleration sets nothing (the fastest wheel holds the reference up); nor does a
+    window under ``ONSET_MIN_S``, nor a window that closes after an anchor's jump was read."""
+    assert ONSET_MIN_S == 0.2
+    assert _onset_drift(0.1, 30) == pytest.approx(0.2, abs=1e-3)
+    assert _onset_drift(0.25, 30) == pytest.approx(0.05, abs=1e-3)
+    assert _onset_drift(0.5, 30) == 0.0
+    assert _onset_drift(0.1, 5) == 0.0  # 0.1 s
+    assert _onset_drift(0.1, 30, anchor_read_first=True) == 0.0
+    with pytest.raises(ValueError, match=r"^slip_target_onset_drift: needs slip_target_drift_co"):
+        WSPBrakingEnv(action_mode="slip_target", accelerometer=True, slip_target_onset_drift=True)
+    with pytest.raises(ValueError, match=r"^slip_target_onset_drift: must be true or false"):
+        WSPBrakingEnv(
+            action_mode="slip_target", accelerometer=True, slip_target_drift_correction=True,
+            slip_target_onset_drift=1,
+        )  # fmt: skip
+    vec = WSPBrakingVectorEnv(
+        num_envs=2, action_mode="slip_target", accelerometer=True,
+        slip_target_drift_correction=True, slip_target_onset_drift=True,
+    )  # fmt: skip
+    assert vec.core.loop.onset_drift is True
+    assert WSPBrakingEnv(action_mode="slip_target").core.loop.onset_drift is False
+    name = SlipTargetPolicy(2.0, SlipTargetLoop(drift_correction=True, onset_drift=True)).name
+    assert name == "slip_target_2kmh_drift_onset"
 
 
 OPTS_UPHILL_LEAVES = {

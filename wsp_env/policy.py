@@ -282,7 +282,8 @@ POLICY_ENV_KWARGS = (
     "accelerometer", "accelerometer_bias_mps2", "control_period_s", "action_repeat",
     "slip_target_min_kmh", "slip_target_max_kmh", "slip_target_gain_per_kmh",
     "slip_target_lead_s", "slip_target_release", "slip_target_max_creep",
-    "slip_target_drift_correction", "slip_target_gain_scale_floor", "memory_features",
+    "slip_target_drift_correction", "slip_target_gain_scale_floor", "slip_target_onset_drift",
+    "memory_features",
 )  # fmt: skip
 # the slip-target loop's periodic-release gate of a model file that does not name it: written
 # before the gate existed (2026-11-27), trained and judged with the ungated loop
@@ -295,6 +296,7 @@ LEGACY_LOOP_SETTINGS: dict[str, Any] = {
     "slip_target_max_creep": 0.0,
     "slip_target_drift_correction": False,
     "slip_target_gain_scale_floor": 1.0,
+    "slip_target_onset_drift": False,
 }
 
 
@@ -305,6 +307,7 @@ def loop_settings_now() -> dict[str, Any]:
         DEFAULT_DRIFT_CORRECTION,
         DEFAULT_GAIN_SCALE_FLOOR,
         DEFAULT_MAX_CREEP,
+        DEFAULT_ONSET_DRIFT,
         DEFAULT_RELEASE,
     )
 
@@ -313,6 +316,7 @@ def loop_settings_now() -> dict[str, Any]:
         "slip_target_max_creep": DEFAULT_MAX_CREEP,
         "slip_target_drift_correction": DEFAULT_DRIFT_CORRECTION,
         "slip_target_gain_scale_floor": DEFAULT_GAIN_SCALE_FLOOR,
+        "slip_target_onset_drift": DEFAULT_ONSET_DRIFT,
     }
 
 

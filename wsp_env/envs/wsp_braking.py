@@ -250,6 +250,7 @@ num_envs=N, **kwargs)``:
 | ``slip_target_max_creep`` | float | ``0.2`` | slip-target mode: each target at most this fraction of the reference speed, or 2 km/h where that is more (a lower target is kept; a target fixed in km/h grows into a near-lock as the train slows), [0, 1]; 0: no cap (the loop before 2026-11-27's cap; a policy file that does not name it loads with 0) |
 | ``slip_target_drift_correction`` | bool | ``False`` | slip-target mode, ``wheels+accel`` tier (an error without the accelerometer): the loop tracks the slip against the aided reference less the drift its last anchor showed and the estimator did not learn (``baselines/slip_target.py``; docs/training.md, "The slip-target loop's drift correction"); a policy file that does not name it loads with ``False`` |
 | ``slip_target_gain_scale_floor`` | float | ``1.0`` | slip-target mode: the loop's gain is ``slip_target_gain_per_kmh`` times the pressure the axle holds over the demand, never below this share of it, (0, 1]; 1: a fixed gain (the loop before 2026-11-28; a policy file that does not name it loads with 1). With 0.25 and a gain of 0.8 per km/h low targets stop about 1 % shorter on leaves and oil, but the valves work harder on soap (73 % more air) and the score falls (docs/training.md, "The slip-target loop's gain scaled by the pressure held") |
+| ``slip_target_onset_drift`` | bool | ``False`` | slip-target mode, with ``slip_target_drift_correction`` (an error without it): the loop reads the accelerometer's offset while every cylinder is still under its brake's threshold at the stop's start (the wheels' mean deceleration against the mean reading) and takes the drift it carries the aided reference above the train away until the first anchor whose jump it reads (docs/training.md, "The onset reading of the accelerometer's offset"); a policy file that does not name it loads with ``False`` |
 | ``stagger_reset_steps`` | int | ``0`` | vector class only (the single class takes only 0), a training option: ``reset`` advances each environment a random, seeded number of steps below this into a stop, driven by the classical WSP, so that stops do not all end together (``WSPBrakingVectorEnv``'s docstring); 0: off |
 | ``memory_features`` | bool | False | append the memory features (Observation Space): per axle time in the current slide, time since the last release, sliding-energy estimate |
 | ``substep_s`` | float | ``0.001`` | the physics substep (linearly implicit; docs/physics.md) |
@@ -325,6 +326,9 @@ num_envs=N, **kwargs)``:
   through every anchor it reads, where before an anchor right after another read as a fall.
   The few model files made with the correction before it load with the mended loop (constant
   targets on the development stops moved by at most −0.0004 in score, paired).
+* v3, 2026-11-28, last (no new version; off by default): the drift-corrected loop may read the
+  accelerometer's offset at the stop's onset (``slip_target_onset_drift``). A policy file that
+  does not name it loads with ``False``.
 """
 
 from __future__ import annotations
@@ -345,6 +349,7 @@ from wsp_env.baselines.slip_target import (
     DEFAULT_GAIN_PER_KMH,
     DEFAULT_GAIN_SCALE_FLOOR,
     DEFAULT_MAX_CREEP,
+    DEFAULT_ONSET_DRIFT,
     DEFAULT_RELEASE,
 )
 from wsp_env.core import kernel as K
@@ -361,14 +366,15 @@ def make_core(n_envs: int, **kwargs: Any) -> BrakingCore:
     controller the residual acts on; with ``action_mode="slip_target"`` the slip-target inner
     loop (``baselines.slip_target.SlipTargetLoop``, with ``slip_target_gain_per_kmh``,
     ``slip_target_lead_s``, ``slip_target_release``, ``slip_target_max_creep``,
-    ``slip_target_drift_correction`` and ``slip_target_gain_scale_floor``, on the same tier's
-    classical thresholds) tracks the targets."""
+    ``slip_target_drift_correction``, ``slip_target_gain_scale_floor`` and
+    ``slip_target_onset_drift``, on the same tier's classical thresholds) tracks the targets."""
     from wsp_env.baselines.slip_target import (
         SlipTargetLoop,
         check_drift_correction,
         check_gain_scale_floor,
         check_loop_args,
         check_max_creep,
+        check_onset_drift,
         check_release,
     )
 
@@ -385,6 +391,7 @@ def make_core(n_envs: int, **kwargs: Any) -> BrakingCore:
     floor = check_gain_scale_floor(
         kwargs.pop("slip_target_gain_scale_floor", DEFAULT_GAIN_SCALE_FLOOR)
     )
+    onset = check_onset_drift(kwargs.pop("slip_target_onset_drift", DEFAULT_ONSET_DRIFT), drift)
     mode = kwargs.get("action_mode")
     if mode in ("residual", "slip_target"):
         from wsp_env.baselines.classical import ClassicalWSP, accelerometer_tier, load_wsp_config
@@ -401,6 +408,7 @@ def make_core(n_envs: int, **kwargs: Any) -> BrakingCore:
                 max_creep=max_creep,
                 drift_correction=drift,
                 gain_scale_floor=floor,
+                onset_drift=onset,
             )
             kwargs.setdefault("slip_target_loop", loop)
     return BrakingCore(n_envs, **kwargs)
@@ -481,6 +489,7 @@ class WSPBrakingEnv(gym.Env):
         slip_target_max_creep: float = DEFAULT_MAX_CREEP,
         slip_target_drift_correction: bool = DEFAULT_DRIFT_CORRECTION,
         slip_target_gain_scale_floor: float = DEFAULT_GAIN_SCALE_FLOOR,
+        slip_target_onset_drift: bool = DEFAULT_ONSET_DRIFT,
         memory_features: bool = False,
         stagger_reset_steps: int = 0,
     ) -> None:
@@ -509,6 +518,7 @@ class WSPBrakingEnv(gym.Env):
             slip_target_max_creep=slip_target_max_creep,
             slip_target_drift_correction=slip_target_drift_correction,
             slip_target_gain_scale_floor=slip_target_gain_scale_floor,
+            slip_target_onset_drift=slip_target_onset_drift,
             memory_features=memory_features,
         )  # fmt: skip
         self.action_space = self.core.action_space()
@@ -671,6 +681,7 @@ class WSPBrakingVectorEnv(VectorEnv):
         slip_target_max_creep: float = DEFAULT_MAX_CREEP,
         slip_target_drift_correction: bool = DEFAULT_DRIFT_CORRECTION,
         slip_target_gain_scale_floor: float = DEFAULT_GAIN_SCALE_FLOOR,
+        slip_target_onset_drift: bool = DEFAULT_ONSET_DRIFT,
         memory_features: bool = False,
         stagger_reset_steps: int = 0,
     ) -> None:
@@ -701,6 +712,7 @@ class WSPBrakingVectorEnv(VectorEnv):
             slip_target_max_creep=slip_target_max_creep,
             slip_target_drift_correction=slip_target_drift_correction,
             slip_target_gain_scale_floor=slip_target_gain_scale_floor,
+            slip_target_onset_drift=slip_target_onset_drift,
             memory_features=memory_features,
         )  # fmt: skip
         self.num_envs = num_envs

@@ -130,7 +130,7 @@ def input_spec(policy: SB3Policy) -> dict[str, Any]:
     the environment of ``policy``'s settings resolves them (the ONNX metadata's ``inputs``)."""
     import dataclasses
 
-    from wsp_env.baselines.slip_target import DRIFT_MIN_SPAN_S, MAX_CREEP_FLOOR_KMH
+    from wsp_env.baselines.slip_target import DRIFT_MIN_SPAN_S, MAX_CREEP_FLOOR_KMH, ONSET_MIN_S
     from wsp_env.core import braking as B
     from wsp_env.core import kernel as K
     from wsp_env.envs import make_core
@@ -203,6 +203,11 @@ def input_spec(policy: SB3Policy) -> dict[str, Any]:
             "accel_learn_min_span_s": K.ACC_LEARN_MIN_SPAN_S,
             # the gain times clip(p / p_d, gain_scale_floor, 1) (1: the fixed gain_per_kmh)
             "gain_scale_floor": loop.gain_scale_floor,
+            # the accelerometer's offset read at the onset (every cylinder under its brake's
+            # threshold, free_share of the full pressure, for at least onset_min_s)
+            "onset_drift": loop.onset_drift,
+            "onset_min_s": ONSET_MIN_S,
+            "onset_free_share": [float(x) for x in loop.free_share],
             "tier": tier,
             "wsp": dataclasses.asdict(loop.cfg),
         }
