@@ -100,6 +100,10 @@ what the sensor model measures) — exactly as the classical WSP (``classical.py
   anchors, 5 of them 2 s after the last, 0.32 m/s^2 learned, 286.0 m
   (``tests/test_slip_target.py``).
   ``docs/training.md``, "The slip-target loop's drift correction".
+  With ``onset_drift`` the correction's drift is also read at every stop's start, before any
+  anchor: while every cylinder is under its brake's threshold every wheel rolls with the
+  train, so the accelerometer's mean reading less the wheels' mean deceleration is its offset
+  (``_read_onset``; ``docs/training.md``, "The onset reading of the accelerometer's offset").
 
 The commands are continuous valve actions (``2 f - 1``), so the loop can drive any continuous
 environment from outside (``SlipTargetPolicy``: a constant target) and gives, bit for bit, the
@@ -236,7 +240,8 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
     the drift its last anchor showed and it has not learned (module docstring; needs the
     accelerometer: ``bind`` refuses a core without one); ``gain_scale_floor``: the gain times
     the pressure held over the demand, never below this (1: a fixed gain; module
-    docstring)."""
+    docstring); ``onset_drift``: with the drift correction, its drift read at the stop's start
+    as well (``_read_onset``)."""
 
     name = "slip_target_loop"
     privileged = False
@@ -406,7 +411,7 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         corrected = v_ref - self.drift * since
         return np.maximum(corrected, np.minimum(v.max(axis=1), v_ref))
 
-    def _read_onset(self, obs: np.ndarray, v: np.ndarray) -> None:
+    def _read_onset(self, obs: np.ndarray, v: np.ndarray) -> np.ndarray:
         """The onset reading (``onset_drift``; module docstring): while every cylinder is under
         its brake's threshold since the stop began, every wheel rolls with the train, so the
         wheels' mean deceleration over that window is the train's, and the accelerometer's mean
@@ -415,7 +420,9 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         jump has been read yet, the drift the correction takes away becomes the rate at which
         that offset carries the aided reference above the train: ``max(0, wheels' deceleration
         - reading)``, within ``ACC_CORR_MAX``. Only that sense: a reading of too much
-        deceleration carries the reference down, where the fastest wheel holds it up."""
+        deceleration carries the reference down, where the fastest wheel holds it up. Returns
+        where the drift was set (the tracked reference steps down there: no fall of the
+        train)."""
         na = self.n_axles
         share = obs[:, 3 * na : 4 * na].astype(np.float64)  # the full pressure's share
         free = (share < self.free_share[None, :]).all(axis=1)
@@ -436,6 +443,7 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         rate = np.clip(wheels - reading, 0.0, K.ACC_CORR_MAX)
         self.drift = np.where(use, rate, self.drift)
         self.onset_open &= free
+        return use
 
     def advance(self, obs: np.ndarray) -> None:
         """One control period of the loop's state on the kernel's observation ``obs``
@@ -450,8 +458,9 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         # limit] (what a braking train does)
         v_ref = obs[:, 4 * na + 1].astype(np.float64) * self.v_scale
         v = obs[:, :na].astype(np.float64) * self.v_scale
+        onset_set = None
         if self.onset_drift:  # the accelerometer's offset read at the stop's onset
-            self._read_onset(obs, v)
+            onset_set = self._read_onset(obs, v)
         if self.drift_correction:  # the reference the loop tracks (``_correct_drift``)
             v_ref = self._correct_drift(obs, v_ref, age, v)
             self.v_ref = v_ref
@@ -460,6 +469,8 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         if self.drift_correction:  # the anchors read exactly (``_correct_drift``): an anchor
             # in a period after an anchor or an idle spell leaves the age at 0, not falling
             known &= ~self.anchored
+        if onset_set is not None:  # the step the onset reading's drift makes is no fall either
+            known &= ~onset_set
         self.decel_ref = np.where(known, np.clip(slope, 0.0, self.ref_limit), self.decel_ref)
         self.prev_ref, self.prev_age = v_ref, age
         self.vent[...] = False

@@ -26,7 +26,8 @@ runs so, one made between the gate and the creep cap its uncapped runs; a loop o
 default is named in the policy's name, ``slip_target_<x>kmh_always``, ``..._creep0``, and
 skipped; ``--loop drift`` reads the targets of the loop with the drift correction,
 ``slip_target_<x>kmh_drift``, instead, and skips the default loop's; ``--loop drift-pgain``
-that loop's with the gain scaled by the pressure held, ``..._drift_pgain0.8x0.25``). Files
+that loop's with the gain scaled by the pressure held, ``..._drift_pgain0.8x0.25``;
+``--loop drift-onset`` with its onset reading, ``..._drift_onset``). Files
 whose loops ran on different classical thresholds (``slip_target_loop``: the tier's since
 2026-11-27, ``WSPConfig()``'s defaults before) are not merged.
 
@@ -209,7 +210,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--loop", choices=tuple(LOOPS), default="default",
                     help="whose constant targets: the default loop's, the drift-corrected "
                          "loop's (slip_target_<x>kmh_drift) or that loop's with the gain "
-                         "scaled by the pressure held (..._drift_pgain0.8x0.25)")  # fmt: skip
+                         "scaled by the pressure held (..._drift_pgain0.8x0.25) or with its "
+                         "onset reading (..._drift_onset)")  # fmt: skip
     args = ap.parse_args(argv)
     try:
         first, targets = load(args.benchmark_json, args.loop)

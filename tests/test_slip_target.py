@@ -888,11 +888,18 @@ def _onset_drift(reading_mps2: float, periods: int, anchor_read_first: bool = Fa
     a_s = core.obs_par[K.OP_DECEL_SCALE]
     for k in range(periods + 2):
         v = 30.0 - 0.3 * k * dt
-        obs = _drift_obs(core, np.full(na, v), v, 0.0, 1.0)  # every valve in apply
+        # the aided reference dead-reckons on the reading: above the train by the offset's drift
+        v_ref = v + max(0.0, 0.3 - reading_mps2) * k * dt
+        obs = _drift_obs(core, np.full(na, v), v_ref, 0.0, 1.0)  # every valve in apply
         obs[0, 3 * na : 4 * na] = 0.0 if k <= periods else 0.5  # then over the threshold
         obs[0, core.kernel_obs_dim - 2] = reading_mps2 / a_s
         loop.advance(obs)
+        if k >= periods:  # before and as the window closes (the tracked reference steps down)
+            _ONSET_CLOSE_DECEL_REF.append(float(loop.decel_ref[0]))
     return float(loop.drift[0])
+
+
+_ONSET_CLOSE_DECEL_REF: list[float] = []
 
 
 def test_the_onset_reading_takes_away_the_drift_of_an_accelerometer_reading_too_little():
@@ -900,9 +907,16 @@ def test_the_onset_reading_takes_away_the_drift_of_an_accelerometer_reading_too_
     reading 0.2 m/s^2 under the wheels' 0.3 m/s^2 is an offset that carries the aided reference
     up at 0.2 m/s a second, which the loop then takes away (float32 speeds: 1e-3); a reading
     of too much deceleration sets nothing (the fastest wheel holds the reference up); nor does a
-    window under ``ONSET_MIN_S``, nor a window that closes after an anchor's jump was read."""
+    window under ``ONSET_MIN_S``, nor a window that closes after an anchor's jump was read. The
+    step the tracked reference takes when the drift is set is not read as a fall."""
     assert ONSET_MIN_S == 0.2
+    _ONSET_CLOSE_DECEL_REF.clear()
     assert _onset_drift(0.1, 30) == pytest.approx(0.2, abs=1e-3)
+    # the step down of the tracked reference onto the train (0.2 m/s a second over the 0.62 s
+    # since the stop began, 0.12 m/s) is no fall of the train: the lead's reference
+    # deceleration keeps the reference's 0.1 m/s^2 of the period before (not 6 m/s^2, clipped)
+    before, at_close = _ONSET_CLOSE_DECEL_REF[0], _ONSET_CLOSE_DECEL_REF[1]
+    assert before == pytest.approx(0.1, abs=2e-3) and at_close == before
     assert _onset_drift(0.25, 30) == pytest.approx(0.05, abs=1e-3)
     assert _onset_drift(0.5, 30) == 0.0
     assert _onset_drift(0.1, 5) == 0.0  # 0.1 s
