@@ -411,7 +411,7 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         corrected = v_ref - self.drift * since
         return np.maximum(corrected, np.minimum(v.max(axis=1), v_ref))
 
-    def _read_onset(self, obs: np.ndarray, v: np.ndarray) -> np.ndarray:
+    def _read_onset(self, obs: np.ndarray, v: np.ndarray) -> np.ndarray | None:
         """The onset reading (``onset_drift``; module docstring): while every cylinder is under
         its brake's threshold since the stop began, every wheel rolls with the train, so the
         wheels' mean deceleration over that window is the train's, and the accelerometer's mean
@@ -422,7 +422,9 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         - reading)``, within ``ACC_CORR_MAX``. Only that sense: a reading of too much
         deceleration carries the reference down, where the fastest wheel holds it up. Returns
         where the drift was set (the tracked reference steps down there: no fall of the
-        train)."""
+        train), or None once every environment's window has closed (nothing left to read)."""
+        if not self.onset_open.any():
+            return None
         na = self.n_axles
         share = obs[:, 3 * na : 4 * na].astype(np.float64)  # the full pressure's share
         free = (share < self.free_share[None, :]).all(axis=1)
