@@ -141,11 +141,17 @@ DEFAULT_GAIN_PER_KMH = 0.2  # the loop's fixed gain by default
 # the gain's scale never falls below this (``gain_scale_floor``); 1: a fixed gain (the default)
 DEFAULT_GAIN_SCALE_FLOOR = 1.0
 DEFAULT_ONSET_DRIFT = False
+DEFAULT_SCALE_CALIBRATION = False
 # the drift correction reads a rate from an anchor's jump only over at least this long (s)
 DRIFT_MIN_SPAN_S = 0.5
 # the onset reading (``onset_drift``) needs every cylinder under its brake's threshold for at
 # least this long (s)
 ONSET_MIN_S = 0.2
+# the wheel-scale calibration (``scale_calibration``) reads its window only above this mean
+# wheel speed (m/s: 10 km/h), and keeps each factor within this of 1 (the sensor model's scale
+# errors are at most 0.1)
+CAL_MIN_SPEED_MPS = 10.0 / 3.6
+CAL_MAX_FACTOR = 0.1
 # the creep cap never asks for less than this (km/h of measured slip; a lower target is kept)
 MAX_CREEP_FLOOR_KMH = 2.0
 
@@ -223,6 +229,16 @@ def check_release(release: Any) -> str:
     return release
 
 
+def check_scale_calibration(scale_calibration: Any) -> bool:
+    """The wheel-scale calibration's switch as a bool, or a one-line ``ConfigError`` naming the
+    environment argument ``slip_target_scale_calibration`` (true or false)."""
+    if not isinstance(scale_calibration, (bool, np.bool_)):
+        raise ConfigError(
+            f"slip_target_scale_calibration: must be true or false, got {scale_calibration!r}"
+        )
+    return bool(scale_calibration)
+
+
 class SlipTargetLoop(ArrayState, PeriodicRelease):
     """Valve commands that track per-valve target sliding speeds (module docstring). ``wsp``:
     the classical WSP's thresholds it reuses (recovery, minimum speed, periodic release); None:
@@ -241,7 +257,9 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
     accelerometer: ``bind`` refuses a core without one); ``gain_scale_floor``: the gain times
     the pressure held over the demand, never below this (1: a fixed gain; module
     docstring); ``onset_drift``: with the drift correction, its drift read at the stop's start
-    as well (``_read_onset``)."""
+    as well (``_read_onset``); ``scale_calibration``: each wheel-speed reading's scale, relative
+    to the wheels' mean, read while every wheel rolls free at the stop's start and divided out
+    (``_calibrate``; either tier)."""
 
     name = "slip_target_loop"
     privileged = False
@@ -256,6 +274,7 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         drift_correction: bool = DEFAULT_DRIFT_CORRECTION,
         gain_scale_floor: float = DEFAULT_GAIN_SCALE_FLOOR,
         onset_drift: bool = DEFAULT_ONSET_DRIFT,
+        scale_calibration: bool = DEFAULT_SCALE_CALIBRATION,
     ) -> None:
         self.wsp_given = wsp  # None: the bound core's tier's thresholds (``bind``)
         self.cfg = wsp or WSPConfig()
@@ -265,6 +284,7 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         self.drift_correction = check_drift_correction(drift_correction)
         self.gain_scale_floor = check_gain_scale_floor(gain_scale_floor)
         self.onset_drift = check_onset_drift(onset_drift, self.drift_correction)
+        self.scale_calibration = check_scale_calibration(scale_calibration)
 
     def bind(self, core: Any) -> None:
         """Attach to a ``BrakingCore``: its scales, valve map and batch size."""
@@ -331,6 +351,15 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         self.onset_acc = np.zeros(n)
         self.onset_v0 = np.full(n, np.nan)
         self.onset_v = np.zeros(n)
+        # the wheel-scale calibration (``scale_calibration``): per environment whether its
+        # window is open, its periods, each wheel's readings' sum (m/s), each wheel's factor
+        # (the wheels' mean over its own mean: 1 until the window closes) and the factor of
+        # the wheel the estimator's reference last equalled (``_calibrate``)
+        self.cal_open = np.ones(n, dtype=bool)
+        self.cal_n = np.zeros(n)
+        self.cal_sum = np.zeros((n, na))
+        self.cal_factor = np.ones((n, na))
+        self.cal_ref_factor = np.ones(n)
 
     def reset(self, env_ids: np.ndarray) -> None:
         """Environments ``env_ids`` start a new stop."""
@@ -352,6 +381,11 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         self.onset_acc[env_ids] = 0.0
         self.onset_v0[env_ids] = np.nan
         self.onset_v[env_ids] = 0.0
+        self.cal_open[env_ids] = True
+        self.cal_n[env_ids] = 0.0
+        self.cal_sum[env_ids] = 0.0
+        self.cal_factor[env_ids] = 1.0
+        self.cal_ref_factor[env_ids] = 1.0
 
     # bound once (``bind``); every other array evolves (``state_dict``)
     _CONSTANT = frozenset({"valve_of_axle", "valve_starts", "_rows", "free_share"})
@@ -447,11 +481,58 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         self.onset_open &= free
         return use
 
+    def _calibrate(self, obs: np.ndarray) -> None:
+        """The wheel-scale calibration's state on the raw observation (``scale_calibration``):
+        while every cylinder is under its brake's threshold since the stop began (the onset
+        reading's window), every wheel rolls with the train, so each sensor's mean reading over
+        the window against the wheels' mean is its scale error relative to the others (a wheel
+        diameter known only to ``wheel_speed_scale_error``; a BCU calibrates it while coasting).
+        When the window closes, after at least ``ONSET_MIN_S`` and above ``CAL_MIN_SPEED_MPS``,
+        each wheel's factor becomes the wheels' mean over its own mean (within
+        ``CAL_MAX_FACTOR`` of 1); a window that closes shorter or slower leaves the factors at
+        1. Then, every period, the factor of the wheel the estimator's reference equals (it
+        follows the fastest wheel and re-anchors on a wheel's reading) is the reference's."""
+        na = self.n_axles
+        v = obs[:, :na].astype(np.float64)
+        if self.cal_open.any():
+            share = obs[:, 3 * na : 4 * na].astype(np.float64)
+            free = (share < self.free_share[None, :]).all(axis=1)
+            still = self.cal_open & free
+            self.cal_sum[still] += v[still] * self.v_scale
+            self.cal_n[still] += 1.0
+            closing = self.cal_open & ~free
+            mean = self.cal_sum / np.maximum(self.cal_n, 1.0)[:, None]
+            ok = closing & (self.cal_n * self.dt >= ONSET_MIN_S - 1e-9)
+            ok &= mean.min(axis=1) > CAL_MIN_SPEED_MPS
+            factor = mean.mean(axis=1, keepdims=True) / np.maximum(mean, 1e-9)
+            factor = np.clip(factor, 1.0 - CAL_MAX_FACTOR, 1.0 + CAL_MAX_FACTOR)
+            self.cal_factor = np.where(ok[:, None], factor, self.cal_factor)
+            self.cal_open &= free
+        ref = obs[:, 4 * na + 1].astype(np.float64)
+        equal = v == ref[:, None]
+        wheel = np.argmax(equal, axis=1)
+        self.cal_ref_factor = np.where(
+            equal.any(axis=1), self.cal_factor[self._rows, wheel], self.cal_ref_factor
+        )
+
+    def _calibrated(self, obs: np.ndarray) -> np.ndarray:
+        """``obs`` with the wheels' speeds and decelerations and the estimator's reference
+        divided by their scale (``_calibrate``'s factors): a float64 copy."""
+        na = self.n_axles
+        out = obs.astype(np.float64)  # a copy
+        out[:, :na] *= self.cal_factor
+        out[:, na : 2 * na] *= self.cal_factor
+        out[:, 4 * na + 1] *= self.cal_ref_factor
+        return out
+
     def advance(self, obs: np.ndarray) -> None:
         """One control period of the loop's state on the kernel's observation ``obs``
         (``(n_envs, kernel_obs_dim)``): the reference's deceleration over the period and the
         periodic release. Call it exactly once per period, before ``command``."""
         na, dt = self.n_axles, self.dt
+        if self.scale_calibration:  # every reading below on the calibrated scales
+            self._calibrate(obs)
+            obs = self._calibrated(obs)
         decel = obs[:, na : 2 * na].astype(np.float64) * self.a_scale
         age = obs[:, self.age_index].astype(np.float64) * self.age_scale
         # the reference's deceleration over the period: kept through a re-anchor (its age fell,
@@ -491,6 +572,8 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         release's vents, under the full demand), which the next ``advance`` reads, so calling
         it twice in a period with the same arguments changes nothing."""
         cfg, na = self.cfg, self.n_axles
+        if self.scale_calibration:  # the scales ``advance`` read
+            obs = self._calibrated(obs)
         v = obs[:, :na].astype(np.float64) * self.v_scale
         decel = obs[:, na : 2 * na].astype(np.float64) * self.a_scale
         pressure = obs[:, 3 * na : 4 * na].astype(np.float64)  # / p_max
@@ -531,8 +614,8 @@ def loop_suffix(loop: SlipTargetLoop) -> str:
     """What a policy's name adds for a loop whose settings are not the defaults:
     ``_<release>`` for the gate, ``_creep<x>`` for the cap, ``_drift`` for the drift correction,
     ``_onset`` for its onset reading, ``_pgain<gain>x<floor>`` for a gain scaled by the pressure
-    held, ``_gain<gain>`` for another
-    fixed gain (``""`` for the default loop), so that two loops never share a name."""
+    held, ``_gain<gain>`` for another fixed gain, ``_cal`` for the wheel-scale calibration
+    (``""`` for the default loop), so that two loops never share a name."""
     gate = "" if loop.release == DEFAULT_RELEASE else f"_{loop.release}"
     cap = "" if loop.max_creep == DEFAULT_MAX_CREEP else f"_creep{loop.max_creep:g}"
     scaled = ""
@@ -541,7 +624,8 @@ def loop_suffix(loop: SlipTargetLoop) -> str:
     elif loop.gain_per_kmh != DEFAULT_GAIN_PER_KMH:
         scaled = f"_gain{loop.gain_per_kmh:g}"
     drift = ("_drift" if loop.drift_correction else "") + ("_onset" if loop.onset_drift else "")
-    return gate + cap + drift + scaled
+    cal = "_cal" if loop.scale_calibration else ""
+    return gate + cap + drift + scaled + cal
 
 
 class SlipTargetPolicy:

@@ -27,7 +27,8 @@ default is named in the policy's name, ``slip_target_<x>kmh_always``, ``..._cree
 skipped; ``--loop drift`` reads the targets of the loop with the drift correction,
 ``slip_target_<x>kmh_drift``, instead, and skips the default loop's; ``--loop drift-pgain``
 that loop's with the gain scaled by the pressure held, ``..._drift_pgain0.8x0.25``;
-``--loop drift-onset`` with its onset reading, ``..._drift_onset``). Files
+``--loop drift-onset`` with its onset reading, ``..._drift_onset``; ``--loop
+drift-onset-cal`` with the wheel-scale calibration too, ``..._drift_onset_cal``). Files
 whose loops ran on different classical thresholds (``slip_target_loop``: the tier's since
 2026-11-27, ``WSPConfig()``'s defaults before) are not merged.
 
@@ -57,6 +58,8 @@ LOOPS = {
     "drift-pgain": "_drift_pgain0.8x0.25",
     # the drift correction with its onset reading of the accelerometer's offset
     "drift-onset": "_drift_onset",
+    # and the wheel-scale calibration
+    "drift-onset-cal": "_drift_onset_cal",
 }
 
 
@@ -211,7 +214,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="whose constant targets: the default loop's, the drift-corrected "
                          "loop's (slip_target_<x>kmh_drift) or that loop's with the gain "
                          "scaled by the pressure held (..._drift_pgain0.8x0.25) or with its "
-                         "onset reading (..._drift_onset)")  # fmt: skip
+                         "onset reading (..._drift_onset), and the wheel-scale calibration "
+                         "(..._drift_onset_cal)")  # fmt: skip
     args = ap.parse_args(argv)
     try:
         first, targets = load(args.benchmark_json, args.loop)

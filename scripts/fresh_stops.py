@@ -13,7 +13,9 @@ frozen classical WSP), ``target:X`` (a constant X km/h target on the slip-target
 tier, the environment's default loop), ``target:X:drift`` (the same with the loop's drift
 correction, ``wheels+accel`` only; ``target:X:drift:onset`` with its onset reading of the
 accelerometer's offset), ``target:X[:drift]:GxF`` (with the loop's gain G per km/h
-scaled by the pressure held, never below F of it: ``target:2:drift:0.8x0.25``) or anything
+scaled by the pressure held, never below F of it: ``target:2:drift:0.8x0.25``), each with
+``:cal`` last for the loop's wheel-scale calibration (either tier: ``target:2:cal``,
+``target:2:drift:onset:cal``), or anything
 ``wsp-env benchmark --policy`` takes (a model file, a shipped policy's name). ``--json`` keeps
 every run (written whole or not at all).
 
@@ -69,17 +71,20 @@ def rail_seeds(vehicle: str, tier: str, rail: str, draw: int) -> list[int]:
 def build_policy(spec: str, tier: str) -> Any:
     """``target:X`` as a constant target on the tier's default loop, ``target:X:drift`` with
     the loop's drift correction, ``target:X[:drift]:GxF`` with its gain G per km/h scaled by
-    the pressure held, never below F of it (``slip_target.parse_pressure_gain``); anything else
+    the pressure held, never below F of it (``slip_target.parse_pressure_gain``), ``:cal``
+    last with the wheel-scale calibration; anything else
     as ``wsp-env benchmark --policy`` builds it."""
     if spec.startswith("target:"):
         value, _, option = spec.removeprefix("target:").partition(":")
         items = option.split(":") if option else []
+        cal = items[-1:] == ["cal"]
+        items = items[:-1] if cal else items
         drift = items[:1] == ["drift"]
         rest = items[1:] if drift else items
         onset = drift and rest[:1] == ["onset"]
         rest = rest[1:] if onset else rest
         if len(rest) > 1 or (rest and "x" not in rest[0]):
-            raise ValueError(f"--policy {spec}: target:X[:drift[:onset]][:GAINxFLOOR]")
+            raise ValueError(f"--policy {spec}: target:X[:drift[:onset]][:GAINxFLOOR][:cal]")
         gain, floor = parse_pressure_gain(rest[0] if rest else "off", f"--policy {spec}")
         if drift and tier != "wheels+accel":
             raise ValueError(f"--policy {spec}: the drift correction needs --tier wheels+accel")
@@ -91,7 +96,7 @@ def build_policy(spec: str, tier: str) -> Any:
             raise ValueError(f"--policy {spec}: a target in [0, 30] km/h")
         # the bound core's tier's loop
         loop = SlipTargetLoop(drift_correction=drift, gain_per_kmh=gain, gain_scale_floor=floor,
-                              onset_drift=onset)  # fmt: skip
+                              onset_drift=onset, scale_calibration=cal)  # fmt: skip
         return SlipTargetPolicy(kmh, loop)
     return make_policy(spec, tier=tier)
 

@@ -2,7 +2,8 @@
 release's gate (``--release``: ``slip_target_release``, ``working`` or ``always``), the creep
 cap (``--max-creep``: ``slip_target_max_creep``, 0-1, 0 no cap), the drift correction
 (``--drift-correction on|off``: ``slip_target_drift_correction``, an accelerometer model's; and
-``--onset-drift on|off``, its onset reading, ``slip_target_onset_drift``) and
+``--onset-drift on|off``, its onset reading, ``slip_target_onset_drift``), the wheel-scale
+calibration (``--scale-calibration on|off``: ``slip_target_scale_calibration``) and
 the gain (``--pressure-gain off|GxF``: ``slip_target_gain_per_kmh`` and
 ``slip_target_gain_scale_floor``, off the fixed 0.2 per km/h, GxF G per km/h times the pressure
 held over the demand, never below F of it; docs/environment.md), so that a
@@ -64,6 +65,11 @@ def main(argv: list[str] | None = None) -> int:
         help="the drift-corrected loop's onset reading of the accelerometer's offset",
     )
     ap.add_argument(
+        "--scale-calibration",
+        choices=("on", "off"),
+        help="the loop's calibration of the wheel-speed sensors' scales at the stop's onset",
+    )
+    ap.add_argument(
         "--pressure-gain",
         help="the loop's gain: off (a fixed 0.2 per km/h) or GxF (G per km/h times the pressure "
         "held over the demand, never below F of it, e.g. 0.8x0.25)",
@@ -83,6 +89,8 @@ def main(argv: list[str] | None = None) -> int:
             settings["slip_target_drift_correction"] = args.drift_correction == "on"
         if args.onset_drift is not None:
             settings["slip_target_onset_drift"] = args.onset_drift == "on"
+        if args.scale_calibration is not None:
+            settings["slip_target_scale_calibration"] = args.scale_calibration == "on"
         if args.pressure_gain is not None:
             gain, floor = parse_pressure_gain(
                 args.pressure_gain, f"--pressure-gain {args.pressure_gain}"
@@ -92,7 +100,7 @@ def main(argv: list[str] | None = None) -> int:
         if not settings:
             raise ValueError(
                 "nothing to set: give --release, --max-creep, --drift-correction, "
-                "--onset-drift and/or --pressure-gain"
+                "--onset-drift, --scale-calibration and/or --pressure-gain"
             )
         if args.out.suffix != ".zip":
             raise ValueError(f"{args.out}: the copy must be a .zip model file")

@@ -15,7 +15,7 @@ until then: the wheels tier's 2.0 m/s^2 recovery hold and 3 s release interval w
         [--target 2 --target 6] [--runs 300] [--stops development] [--vehicle regiolis] \\
         [--json runs/bench/slip_constant.json] [--rail-teacher] [--release always] \\
         [--max-creep 0 --max-creep 0.2] [--drift-correction on [--onset-drift on]] \\
-        [--pressure-gain 0.8x0.25]
+        [--pressure-gain 0.8x0.25] [--scale-calibration on]
 
 ``--rail-teacher`` adds ``baselines.oracle.SlipTargetOracle``: the privileged teacher of the
 imitation start (``oracle_target_rail``: each stop's constant target picked by its rail, which
@@ -87,6 +87,13 @@ def main(argv: list[str] | None = None) -> int:
         "onset (needs --drift-correction on; repeatable; default off)",
     )
     ap.add_argument(
+        "--scale-calibration",
+        action="append",
+        choices=("off", "on"),
+        help="the loop's calibration of the wheel-speed sensors' scales at the stop's onset "
+        "(either tier; repeatable: each target under each; default off)",
+    )
+    ap.add_argument(
         "--pressure-gain",
         action="append",
         help="the loop's gain: off (a fixed 0.2 per km/h) or GxF, G per km/h times the pressure "
@@ -114,6 +121,7 @@ def main(argv: list[str] | None = None) -> int:
     if any(onsets) and not all(drifts):
         print("--onset-drift on: needs --drift-correction on (only)", file=sys.stderr)
         return 2
+    cals = [c == "on" for c in args.scale_calibration or ["off"]]
     if any(drifts) and args.tier != "wheels+accel":
         print("--drift-correction on: needs --tier wheels+accel", file=sys.stderr)
         return 2
@@ -126,12 +134,13 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     loops = [
         {"release": g, "max_creep": c, "drift_correction": d, "onset_drift": o,
-         "gain_per_kmh": gain, "gain_scale_floor": floor}
+         "gain_per_kmh": gain, "gain_scale_floor": floor, "scale_calibration": cal}
         for g in args.release or [DEFAULT_RELEASE]
         for c in caps
         for d in drifts
         for o in onsets
         for gain, floor in gains
+        for cal in cals
     ]  # fmt: skip
     wsp = load_wsp_config(tier=args.tier) if args.thresholds == "tier" else WSPConfig()
     policies: list = [

@@ -77,12 +77,19 @@ def test_a_target_with_the_drift_correction_runs_the_corrected_loop():
     assert not alone.loop.drift_correction and alone.loop.gain_scale_floor == 0.5
     onset = fresh_stops.build_policy("target:2:drift:onset", "wheels+accel")
     assert onset.loop.onset_drift and onset.name == "slip_target_2kmh_drift_onset"
+    cal = fresh_stops.build_policy("target:2:drift:onset:cal", "wheels+accel")
+    assert cal.loop.onset_drift and cal.loop.scale_calibration
+    assert cal.name == "slip_target_2kmh_drift_onset_cal"
+    alone_cal = fresh_stops.build_policy("target:2:cal", "wheels")
+    assert alone_cal.loop.scale_calibration and not alone_cal.loop.drift_correction
+    assert not onset.loop.scale_calibration
     bad = (
         ("target:2:onset", "target:X[:drift[:onset]][:GAINxFLOOR]"),
         ("target:2:drift:0.8", "target:X[:drift[:onset]][:GAINxFLOOR]"),
         ("target:2:drift:ax0.25", "slip_target_gain_per_kmh: expected a number"),
         ("target:2:0.8x2", "slip_target_gain_scale_floor: must be in (0, 1]"),
         ("target:2:drift:0.8x0.25:x", "target:X[:drift[:onset]][:GAINxFLOOR]"),
+        ("target:2:cal:drift", "target:X[:drift[:onset]][:GAINxFLOOR][:cal]"),
     )
     for spec, words in bad:
         with pytest.raises(ValueError, match=re.escape(words)):

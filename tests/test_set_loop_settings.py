@@ -85,6 +85,10 @@ def test_the_copy_names_the_settings_and_keeps_the_rest(tmp_path, capsys):
     assert set_loop_settings.main(argv) == 0
     kw = model_metadata(onset)["env_kwargs"]
     assert kw["slip_target_onset_drift"] is True and kw["slip_target_drift_correction"] is True
+    assert kw["slip_target_scale_calibration"] is False  # a file from before it: no calibration
+    cal = tmp_path / "cal" / "student.zip"
+    assert set_loop_settings.main([str(old), str(cal), "--scale-calibration", "on"]) == 0
+    assert model_metadata(cal)["env_kwargs"]["slip_target_scale_calibration"] is True
 
 
 def test_an_existing_copy_or_a_failed_write_leaves_nothing_new(tmp_path, capsys, monkeypatch):

@@ -23,6 +23,7 @@ from test_train import train_config
 
 from wsp_env.baselines.classical import ClassicalWSP, WSPConfig, load_wsp_config
 from wsp_env.baselines.slip_target import (
+    CAL_MIN_SPEED_MPS,
     MAX_CREEP_FLOOR_KMH,
     ONSET_MIN_S,
     SlipTargetLoop,
@@ -30,8 +31,11 @@ from wsp_env.baselines.slip_target import (
 )
 from wsp_env.cli import main
 from wsp_env.core import kernel as K
+from wsp_env.core.config import load_vehicle
 from wsp_env.envs import WSPBrakingEnv, WSPBrakingVectorEnv, make_core
 from wsp_env.evaluation import load_suite, run_suite
+from wsp_env.evaluation.runner import run_runs
+from wsp_env.evaluation.suites import Run
 from wsp_env.policy import (
     POLICY_ENV_KWARGS,
     SB3Policy,
@@ -1003,3 +1007,95 @@ def test_the_drift_correction_needs_the_accelerometer_and_is_off_by_default():
     path = configs_root() / "train" / "ppo_bc_slip_target_drift_accel_uic_z1.yaml"
     kw = load_train_config(str(path)).env_kwargs
     assert WSPBrakingVectorEnv(num_envs=1, **kw).core.loop.drift_correction is True
+
+
+SCALES = np.array([1.005, 0.996, 1.002, 0.997])  # four wheel-speed sensors' scale errors
+
+
+def _calibrated_start(periods: int, v0: float = 30.0, tier: str = "wheels") -> SlipTargetLoop:
+    """A loop with the wheel-scale calibration after a synthetic start: the train slowing at
+    0.3 m/s^2 from ``v0`` m/s, every wheel rolling with it and its sensor reading ``SCALES``
+    times its speed, every cylinder at 0 for ``periods`` control periods, then over its
+    threshold (the window closes); the estimator's reference is the fastest reading."""
+    core = make_core(1, accelerometer=tier == "wheels+accel")
+    loop = SlipTargetLoop(load_wsp_config(tier=tier), scale_calibration=True)
+    loop.bind(core)
+    loop.reset(np.array([0]))
+    na, dt = core.n_axles, core.sim.control_period_s
+    for k in range(periods + 2):
+        wheels = SCALES * (v0 - 0.3 * k * dt)
+        obs = _drift_obs(core, wheels, float(wheels.max()), 0.0, 1.0)
+        obs[0, 3 * na : 4 * na] = 0.0 if k <= periods else 0.5
+        loop.advance(obs)
+    return loop
+
+
+def test_the_scale_calibration_reads_each_sensors_scale_while_every_wheel_rolls_free():
+    """While every cylinder is under its brake's threshold every wheel rolls with the train, so
+    each sensor's mean reading against the wheels' mean is its scale relative to the others:
+    after the window each wheel's factor times its scale is the scales' mean (to the
+    observation's float32 precision), the calibrated readings agree, and the reference takes
+    the factor of the wheel it equals (the fastest, wheel 0), kept while it equals none. A
+    window under ``ONSET_MIN_S``, or under ``CAL_MIN_SPEED_MPS``, leaves every factor at 1;
+    ``reset`` opens the window again. Either tier; off by default; the name says ``_cal``."""
+    for tier in ("wheels", "wheels+accel"):
+        loop = _calibrated_start(30, tier=tier)
+        assert not loop.cal_open[0]
+        np.testing.assert_allclose(loop.cal_factor[0] * SCALES, SCALES.mean(), rtol=2e-6)
+        assert loop.cal_ref_factor[0] == loop.cal_factor[0, 0]
+    core = make_core(1, accelerometer=True)  # the last loop's
+    na = core.n_axles
+    wheels = SCALES * 20.0
+    obs = _drift_obs(core, wheels, float(wheels[2]), 0.0, 1.0)  # the reference equals wheel 2
+    loop.advance(obs)
+    assert loop.cal_ref_factor[0] == loop.cal_factor[0, 2]
+    out = loop._calibrated(obs)
+    np.testing.assert_allclose(out[0, :na], out[0, 4 * na + 1], rtol=2e-6)
+    loop.advance(_drift_obs(core, wheels - 0.5, float(wheels[2]) - 0.1, 0.0, 1.0))  # none
+    assert loop.cal_ref_factor[0] == loop.cal_factor[0, 2]
+    assert (_calibrated_start(5).cal_factor == 1.0).all()  # 0.1 s
+    assert (_calibrated_start(30, v0=0.9 * CAL_MIN_SPEED_MPS).cal_factor == 1.0).all()
+    loop.reset(np.array([0]))
+    assert loop.cal_open[0] and (loop.cal_factor == 1.0).all() and loop.cal_ref_factor[0] == 1.0
+    assert WSPBrakingEnv(action_mode="slip_target").core.loop.scale_calibration is False
+    env = WSPBrakingEnv(action_mode="slip_target", slip_target_scale_calibration=True)
+    assert env.core.loop.scale_calibration is True
+    with pytest.raises(ValueError, match=r"^slip_target_scale_calibration: must be true or false"):
+        WSPBrakingEnv(action_mode="slip_target", slip_target_scale_calibration="yes")
+    name = SlipTargetPolicy(2.0, SlipTargetLoop(scale_calibration=True)).name
+    assert name == "slip_target_2kmh_cal"
+
+
+def test_the_scale_calibration_holds_every_axle_at_the_same_true_slip_on_soap():
+    """Soap 0.07 at 120 km/h, a 2 km/h target, two seeds, wheel-speed sensors with +-1 % scale
+    errors: each axle's measured slip is off by its sensor's error times the speed (up to
+    2.4 km/h between two axles at 120 km/h), so without the calibration the axles' median true
+    slips mid-stop lie 0.7-1.6 km/h apart and the median spread between the axles is over
+    1.2 km/h; calibrated they lie within 0.15 km/h and the spread falls under half of it, and
+    the stops are shorter (measured 723.9 / 764.5 m -> 716.0 / 753.4 m; with exact sensors
+    721.4 / 747.6 m). With exact sensors the calibration changes the stops by under 1 mm (the
+    free-rolling wheels' readings differ only at float rounding)."""
+    veh = load_vehicle("uic_z1")
+    runs = [Run("soap", s, SOAP, {}, veh) for s in (0, 1)]
+    out = {}
+    for scale in (0.01, 0.0):
+        for cal in (False, True):
+            policy = SlipTargetPolicy(2.0, SlipTargetLoop(scale_calibration=cal))
+            sensors = {"wheel_speed_scale_error": scale}
+            res, recs = run_runs(veh, runs, policy, record="all", env_kwargs={"sensors": sensors})
+            stops = []
+            for r, rec in zip(res, recs.values(), strict=True):
+                slip = rec.v_train_kmh[:, None] - rec.v_axle_kmh
+                mid = (rec.v_train_kmh > 20.0) & (rec.time_s > 3.0)
+                medians = np.median(slip[mid], axis=0)
+                spread = float(np.median(slip[mid].max(axis=1) - slip[mid].min(axis=1)))
+                stops.append((r["stopping_distance_m"], float(np.ptp(medians)), spread))
+            out[scale, cal] = stops
+    for (d0, ptp0, spread0), (d1, ptp1, spread1) in zip(
+        out[0.01, False], out[0.01, True], strict=True
+    ):
+        assert ptp0 > 0.5 and spread0 > 1.0  # the control: the sensors' scales show
+        assert ptp1 < 0.15 and spread1 < 0.5 * spread0
+        assert d1 < d0 - 5.0
+    for (d0, *_), (d1, *_) in zip(out[0.0, False], out[0.0, True], strict=True):
+        assert abs(d1 - d0) < 1e-3

@@ -283,7 +283,7 @@ POLICY_ENV_KWARGS = (
     "slip_target_min_kmh", "slip_target_max_kmh", "slip_target_gain_per_kmh",
     "slip_target_lead_s", "slip_target_release", "slip_target_max_creep",
     "slip_target_drift_correction", "slip_target_gain_scale_floor", "slip_target_onset_drift",
-    "memory_features",
+    "slip_target_scale_calibration", "memory_features",
 )  # fmt: skip
 # the slip-target loop's periodic-release gate of a model file that does not name it: written
 # before the gate existed (2026-11-27), trained and judged with the ungated loop
@@ -297,6 +297,7 @@ LEGACY_LOOP_SETTINGS: dict[str, Any] = {
     "slip_target_drift_correction": False,
     "slip_target_gain_scale_floor": 1.0,
     "slip_target_onset_drift": False,
+    "slip_target_scale_calibration": False,
 }
 
 
@@ -309,6 +310,7 @@ def loop_settings_now() -> dict[str, Any]:
         DEFAULT_MAX_CREEP,
         DEFAULT_ONSET_DRIFT,
         DEFAULT_RELEASE,
+        DEFAULT_SCALE_CALIBRATION,
     )
 
     return {
@@ -317,6 +319,7 @@ def loop_settings_now() -> dict[str, Any]:
         "slip_target_drift_correction": DEFAULT_DRIFT_CORRECTION,
         "slip_target_gain_scale_floor": DEFAULT_GAIN_SCALE_FLOOR,
         "slip_target_onset_drift": DEFAULT_ONSET_DRIFT,
+        "slip_target_scale_calibration": DEFAULT_SCALE_CALIBRATION,
     }
 
 

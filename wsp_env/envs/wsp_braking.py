@@ -251,6 +251,7 @@ num_envs=N, **kwargs)``:
 | ``slip_target_drift_correction`` | bool | ``False`` | slip-target mode, ``wheels+accel`` tier (an error without the accelerometer): the loop tracks the slip against the aided reference less the drift its last anchor showed and the estimator did not learn (``baselines/slip_target.py``; docs/training.md, "The slip-target loop's drift correction"); a policy file that does not name it loads with ``False`` |
 | ``slip_target_gain_scale_floor`` | float | ``1.0`` | slip-target mode: the loop's gain is ``slip_target_gain_per_kmh`` times the pressure the axle holds over the demand, never below this share of it, (0, 1]; 1: a fixed gain (the loop before 2026-11-28; a policy file that does not name it loads with 1). With 0.25 and a gain of 0.8 per km/h low targets stop about 1 % shorter on leaves and oil, but the valves work harder on soap (73 % more air) and the score falls (docs/training.md, "The slip-target loop's gain scaled by the pressure held") |
 | ``slip_target_onset_drift`` | bool | ``False`` | slip-target mode, with ``slip_target_drift_correction`` (an error without it): the loop reads the accelerometer's offset while every cylinder is still under its brake's threshold at the stop's start (the wheels' mean deceleration against the mean reading) and takes the drift it carries the aided reference above the train away until the first anchor whose jump it reads (docs/training.md, "The onset reading of the accelerometer's offset"); a policy file that does not name it loads with ``False`` |
+| ``slip_target_scale_calibration`` | bool | ``False`` | slip-target mode, either tier: the loop reads each wheel-speed sensor's scale against the wheels' mean while every cylinder is still under its brake's threshold at the stop's start (every wheel rolls with the train) and divides it out of the wheels' readings and the estimator's reference (a BCU's wheel-diameter calibration; docs/training.md, "The wheel-scale calibration"); a policy file that does not name it loads with ``False`` |
 | ``stagger_reset_steps`` | int | ``0`` | vector class only (the single class takes only 0), a training option: ``reset`` advances each environment a random, seeded number of steps below this into a stop, driven by the classical WSP, so that stops do not all end together (``WSPBrakingVectorEnv``'s docstring); 0: off |
 | ``memory_features`` | bool | False | append the memory features (Observation Space): per axle time in the current slide, time since the last release, sliding-energy estimate |
 | ``substep_s`` | float | ``0.001`` | the physics substep (linearly implicit; docs/physics.md) |
@@ -329,6 +330,9 @@ num_envs=N, **kwargs)``:
 * v3, 2026-11-28, last (no new version; off by default): the drift-corrected loop may read the
   accelerometer's offset at the stop's onset (``slip_target_onset_drift``). A policy file that
   does not name it loads with ``False``.
+* v3, 2026-12-06 (no new version; off by default): the slip-target loop may calibrate the
+  wheel-speed sensors' scales at the stop's onset (``slip_target_scale_calibration``). A
+  policy file that does not name it loads with ``False``.
 """
 
 from __future__ import annotations
@@ -351,6 +355,7 @@ from wsp_env.baselines.slip_target import (
     DEFAULT_MAX_CREEP,
     DEFAULT_ONSET_DRIFT,
     DEFAULT_RELEASE,
+    DEFAULT_SCALE_CALIBRATION,
 )
 from wsp_env.core import kernel as K
 from wsp_env.core.braking import TERM_NAMES, BrakingCore, RewardConfig, ScenarioConfig
@@ -366,8 +371,9 @@ def make_core(n_envs: int, **kwargs: Any) -> BrakingCore:
     controller the residual acts on; with ``action_mode="slip_target"`` the slip-target inner
     loop (``baselines.slip_target.SlipTargetLoop``, with ``slip_target_gain_per_kmh``,
     ``slip_target_lead_s``, ``slip_target_release``, ``slip_target_max_creep``,
-    ``slip_target_drift_correction``, ``slip_target_gain_scale_floor`` and
-    ``slip_target_onset_drift``, on the same tier's classical thresholds) tracks the targets."""
+    ``slip_target_drift_correction``, ``slip_target_gain_scale_floor``,
+    ``slip_target_onset_drift`` and ``slip_target_scale_calibration``, on the same tier's
+    classical thresholds) tracks the targets."""
     from wsp_env.baselines.slip_target import (
         SlipTargetLoop,
         check_drift_correction,
@@ -376,6 +382,7 @@ def make_core(n_envs: int, **kwargs: Any) -> BrakingCore:
         check_max_creep,
         check_onset_drift,
         check_release,
+        check_scale_calibration,
     )
 
     # the loop's own arguments: checked in every mode (as residual_scale is), used in one
@@ -392,6 +399,9 @@ def make_core(n_envs: int, **kwargs: Any) -> BrakingCore:
         kwargs.pop("slip_target_gain_scale_floor", DEFAULT_GAIN_SCALE_FLOOR)
     )
     onset = check_onset_drift(kwargs.pop("slip_target_onset_drift", DEFAULT_ONSET_DRIFT), drift)
+    calibrate = check_scale_calibration(
+        kwargs.pop("slip_target_scale_calibration", DEFAULT_SCALE_CALIBRATION)
+    )
     mode = kwargs.get("action_mode")
     if mode in ("residual", "slip_target"):
         from wsp_env.baselines.classical import ClassicalWSP, accelerometer_tier, load_wsp_config
@@ -409,6 +419,7 @@ def make_core(n_envs: int, **kwargs: Any) -> BrakingCore:
                 drift_correction=drift,
                 gain_scale_floor=floor,
                 onset_drift=onset,
+                scale_calibration=calibrate,
             )
             kwargs.setdefault("slip_target_loop", loop)
     return BrakingCore(n_envs, **kwargs)
@@ -490,6 +501,7 @@ class WSPBrakingEnv(gym.Env):
         slip_target_drift_correction: bool = DEFAULT_DRIFT_CORRECTION,
         slip_target_gain_scale_floor: float = DEFAULT_GAIN_SCALE_FLOOR,
         slip_target_onset_drift: bool = DEFAULT_ONSET_DRIFT,
+        slip_target_scale_calibration: bool = DEFAULT_SCALE_CALIBRATION,
         memory_features: bool = False,
         stagger_reset_steps: int = 0,
     ) -> None:
@@ -519,6 +531,7 @@ class WSPBrakingEnv(gym.Env):
             slip_target_drift_correction=slip_target_drift_correction,
             slip_target_gain_scale_floor=slip_target_gain_scale_floor,
             slip_target_onset_drift=slip_target_onset_drift,
+            slip_target_scale_calibration=slip_target_scale_calibration,
             memory_features=memory_features,
         )  # fmt: skip
         self.action_space = self.core.action_space()
@@ -682,6 +695,7 @@ class WSPBrakingVectorEnv(VectorEnv):
         slip_target_drift_correction: bool = DEFAULT_DRIFT_CORRECTION,
         slip_target_gain_scale_floor: float = DEFAULT_GAIN_SCALE_FLOOR,
         slip_target_onset_drift: bool = DEFAULT_ONSET_DRIFT,
+        slip_target_scale_calibration: bool = DEFAULT_SCALE_CALIBRATION,
         memory_features: bool = False,
         stagger_reset_steps: int = 0,
     ) -> None:
@@ -713,6 +727,7 @@ class WSPBrakingVectorEnv(VectorEnv):
             slip_target_drift_correction=slip_target_drift_correction,
             slip_target_gain_scale_floor=slip_target_gain_scale_floor,
             slip_target_onset_drift=slip_target_onset_drift,
+            slip_target_scale_calibration=slip_target_scale_calibration,
             memory_features=memory_features,
         )  # fmt: skip
         self.num_envs = num_envs

@@ -130,7 +130,13 @@ def input_spec(policy: SB3Policy) -> dict[str, Any]:
     the environment of ``policy``'s settings resolves them (the ONNX metadata's ``inputs``)."""
     import dataclasses
 
-    from wsp_env.baselines.slip_target import DRIFT_MIN_SPAN_S, MAX_CREEP_FLOOR_KMH, ONSET_MIN_S
+    from wsp_env.baselines.slip_target import (
+        CAL_MAX_FACTOR,
+        CAL_MIN_SPEED_MPS,
+        DRIFT_MIN_SPAN_S,
+        MAX_CREEP_FLOOR_KMH,
+        ONSET_MIN_S,
+    )
     from wsp_env.core import braking as B
     from wsp_env.core import kernel as K
     from wsp_env.envs import make_core
@@ -208,6 +214,13 @@ def input_spec(policy: SB3Policy) -> dict[str, Any]:
             "onset_drift": loop.onset_drift,
             "onset_min_s": ONSET_MIN_S,
             "onset_free_share": [float(x) for x in loop.free_share],
+            # each wheel's reading (and its deceleration) times the wheels' mean reading over
+            # its own in the same window (for at least onset_min_s, above cal_min_speed_kmh;
+            # within cal_max_factor of 1), the reference times the factor of the wheel it
+            # last equalled
+            "scale_calibration": loop.scale_calibration,
+            "cal_min_speed_kmh": CAL_MIN_SPEED_MPS * 3.6,
+            "cal_max_factor": CAL_MAX_FACTOR,
             "tier": tier,
             "wsp": dataclasses.asdict(loop.cfg),
         }
