@@ -147,9 +147,9 @@ DRIFT_MIN_SPAN_S = 0.5
 # the onset reading (``onset_drift``) needs every cylinder under its brake's threshold for at
 # least this long (s)
 ONSET_MIN_S = 0.2
-# the wheel-scale calibration (``scale_calibration``) reads its window only above this mean
-# wheel speed (m/s: 10 km/h), and keeps each factor within this of 1 (the sensor model's scale
-# errors are at most 0.1)
+# the wheel-scale calibration (``scale_calibration``) reads its window only where every wheel's
+# mean reading is above this (m/s: 10 km/h), and keeps each factor within this of 1 (the sensor
+# model's scale errors are at most 0.1)
 CAL_MIN_SPEED_MPS = 10.0 / 3.6
 CAL_MAX_FACTOR = 0.1
 # the creep cap never asks for less than this (km/h of measured slip; a lower target is kept)
@@ -360,6 +360,10 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         self.cal_sum = np.zeros((n, na))
         self.cal_factor = np.ones((n, na))
         self.cal_ref_factor = np.ones(n)
+        # the estimator's reference and the wheels' readings of the last period, uncalibrated
+        # (m/s): its anchor rule's inputs (``_correct_drift``)
+        self.kernel_ref = np.zeros(n)
+        self.kernel_wheels = np.zeros((n, na))
 
     def reset(self, env_ids: np.ndarray) -> None:
         """Environments ``env_ids`` start a new stop."""
@@ -386,6 +390,8 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         self.cal_sum[env_ids] = 0.0
         self.cal_factor[env_ids] = 1.0
         self.cal_ref_factor[env_ids] = 1.0
+        self.kernel_ref[env_ids] = 0.0
+        self.kernel_wheels[env_ids] = 0.0
 
     # bound once (``bind``); every other array evolves (``state_dict``)
     _CONSTANT = frozenset({"valve_of_axle", "valve_starts", "_rows", "free_share"})
@@ -424,7 +430,15 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         dt = self.dt
         na = self.n_axles
         out_of_apply = (obs[:, self.valve_cols] < 1.0 - 1e-6).any(axis=1)
-        slipped = self._slips(self.raw_ref, self.prev_wheels)  # at the period's start
+        # at the period's start, on the readings the estimator judged (uncalibrated)
+        if self.scale_calibration:
+            slipped = self._slips(self.kernel_ref, self.kernel_wheels)
+            self.kernel_ref = obs[:, 4 * na + 1].astype(np.float64) / self.cal_ref_factor
+            self.kernel_wheels = obs[:, :na].astype(np.float64) / self.cal_factor
+            self.kernel_ref *= self.v_scale
+            self.kernel_wheels *= self.v_scale
+        else:
+            slipped = self._slips(self.raw_ref, self.prev_wheels)
         demand = obs[:, 4 * na] > 0.0
         known = np.isfinite(self.raw_ref)  # not the stop's first observation
         anchored = known & (age == 0.0) & (out_of_apply | slipped) & demand
@@ -487,11 +501,14 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         reading's window), every wheel rolls with the train, so each sensor's mean reading over
         the window against the wheels' mean is its scale error relative to the others (a wheel
         diameter known only to ``wheel_speed_scale_error``; a BCU calibrates it while coasting).
-        When the window closes, after at least ``ONSET_MIN_S`` and above ``CAL_MIN_SPEED_MPS``,
-        each wheel's factor becomes the wheels' mean over its own mean (within
-        ``CAL_MAX_FACTOR`` of 1); a window that closes shorter or slower leaves the factors at
-        1. Then, every period, the factor of the wheel the estimator's reference equals (it
-        follows the fastest wheel and re-anchors on a wheel's reading) is the reference's."""
+        When the window closes, after at least ``ONSET_MIN_S`` with every wheel's mean reading
+        above ``CAL_MIN_SPEED_MPS``, each wheel's factor becomes the wheels' mean over its own
+        mean (within ``CAL_MAX_FACTOR`` of 1), and the last period's reference and readings the
+        loop keeps are put on the new scales (the step is no fall of the train); a window that
+        closes shorter or slower leaves the factors at 1. Then, every period, the factor of the
+        wheel the estimator's reference equals (it follows the fastest wheel and re-anchors on
+        a wheel's reading) is the reference's. The drift correction still reads the estimator's
+        anchors on the uncalibrated readings its rule judges (``_correct_drift``)."""
         na = self.n_axles
         v = obs[:, :na].astype(np.float64)
         if self.cal_open.any():
@@ -508,12 +525,20 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
             factor = np.clip(factor, 1.0 - CAL_MAX_FACTOR, 1.0 + CAL_MAX_FACTOR)
             self.cal_factor = np.where(ok[:, None], factor, self.cal_factor)
             self.cal_open &= free
+        else:
+            ok = None
         ref = obs[:, 4 * na + 1].astype(np.float64)
         equal = v == ref[:, None]
         wheel = np.argmax(equal, axis=1)
         self.cal_ref_factor = np.where(
             equal.any(axis=1), self.cal_factor[self._rows, wheel], self.cal_ref_factor
         )
+        if ok is not None and ok.any():  # the scales change: the last period's readings the
+            # loop keeps, on the new scales (they were on 1), so no step reads as a fall
+            self.prev_ref = np.where(ok, self.prev_ref * self.cal_ref_factor, self.prev_ref)
+            self.raw_ref = np.where(ok, self.raw_ref * self.cal_ref_factor, self.raw_ref)
+            self.prev_wheels = np.where(ok[:, None], self.prev_wheels * self.cal_factor,
+                                        self.prev_wheels)  # fmt: skip
 
     def _calibrated(self, obs: np.ndarray) -> np.ndarray:
         """``obs`` with the wheels' speeds and decelerations and the estimator's reference

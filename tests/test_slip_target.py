@@ -1012,21 +1012,30 @@ def test_the_drift_correction_needs_the_accelerometer_and_is_off_by_default():
 SCALES = np.array([1.005, 0.996, 1.002, 0.997])  # four wheel-speed sensors' scale errors
 
 
-def _calibrated_start(periods: int, v0: float = 30.0, tier: str = "wheels") -> SlipTargetLoop:
+def _calibrated_start(
+    periods: int, v0: float = 30.0, tier: str = "wheels", scales: np.ndarray = SCALES,
+    loop: SlipTargetLoop | None = None,
+) -> SlipTargetLoop:  # fmt: skip
     """A loop with the wheel-scale calibration after a synthetic start: the train slowing at
-    0.3 m/s^2 from ``v0`` m/s, every wheel rolling with it and its sensor reading ``SCALES``
-    times its speed, every cylinder at 0 for ``periods`` control periods, then over its
-    threshold (the window closes); the estimator's reference is the fastest reading."""
+    0.3 m/s^2 from ``v0`` m/s, every wheel rolling with it and its sensor reading ``scales``
+    times its speed, every cylinder at 0 for ``periods`` + 1 control periods, then over its
+    threshold for 20 (the window closes); the estimator's reference is the fastest reading.
+    ``loop``: go on with this one (a new stop: ``reset`` first); its reference deceleration
+    each period is in ``loop.trace``."""
     core = make_core(1, accelerometer=tier == "wheels+accel")
-    loop = SlipTargetLoop(load_wsp_config(tier=tier), scale_calibration=True)
-    loop.bind(core)
+    if loop is None:
+        loop = SlipTargetLoop(load_wsp_config(tier=tier), scale_calibration=True)
+        loop.bind(core)
     loop.reset(np.array([0]))
+    loop.trace = []
     na, dt = core.n_axles, core.sim.control_period_s
-    for k in range(periods + 2):
-        wheels = SCALES * (v0 - 0.3 * k * dt)
+    for k in range(periods + 21):
+        wheels = scales * (v0 - 0.3 * k * dt)
         obs = _drift_obs(core, wheels, float(wheels.max()), 0.0, 1.0)
+        obs[0, na : 2 * na] = 0.3 * scales / core.obs_par[K.OP_DECEL_SCALE]
         obs[0, 3 * na : 4 * na] = 0.0 if k <= periods else 0.5
         loop.advance(obs)
+        loop.trace.append(float(loop.decel_ref[0]))
     return loop
 
 
@@ -1037,26 +1046,37 @@ def test_the_scale_calibration_reads_each_sensors_scale_while_every_wheel_rolls_
     observation's float32 precision), the calibrated readings agree, and the reference takes
     the factor of the wheel it equals (the fastest, wheel 0), kept while it equals none. A
     window under ``ONSET_MIN_S``, or under ``CAL_MIN_SPEED_MPS``, leaves every factor at 1;
-    ``reset`` opens the window again. Either tier; off by default; the name says ``_cal``."""
+    ``reset`` opens the window again and a new stop's window reads its own scales. The step the
+    calibrated reference takes as the window closes (to the scales' mean from the fastest
+    sensor's) is no fall: the reference deceleration stays the train's 0.3 m/s^2. Either tier;
+    off by default; the name says ``_cal``."""
     for tier in ("wheels", "wheels+accel"):
         loop = _calibrated_start(30, tier=tier)
         assert not loop.cal_open[0]
         np.testing.assert_allclose(loop.cal_factor[0] * SCALES, SCALES.mean(), rtol=2e-6)
         assert loop.cal_ref_factor[0] == loop.cal_factor[0, 0]
+        np.testing.assert_allclose(loop.trace[1:], 0.3, atol=1e-2)  # float32 speeds, 20 ms
     core = make_core(1, accelerometer=True)  # the last loop's
     na = core.n_axles
     wheels = SCALES * 20.0
     obs = _drift_obs(core, wheels, float(wheels[2]), 0.0, 1.0)  # the reference equals wheel 2
     loop.advance(obs)
     assert loop.cal_ref_factor[0] == loop.cal_factor[0, 2]
+    obs[0, na : 2 * na] = 0.3 * SCALES / core.obs_par[K.OP_DECEL_SCALE]
     out = loop._calibrated(obs)
     np.testing.assert_allclose(out[0, :na], out[0, 4 * na + 1], rtol=2e-6)
+    np.testing.assert_allclose(out[0, na : 2 * na], out[0, na], rtol=2e-6)  # decelerations too
     loop.advance(_drift_obs(core, wheels - 0.5, float(wheels[2]) - 0.1, 0.0, 1.0))  # none
     assert loop.cal_ref_factor[0] == loop.cal_factor[0, 2]
-    assert (_calibrated_start(5).cal_factor == 1.0).all()  # 0.1 s
+    assert (_calibrated_start(5).cal_factor == 1.0).all()  # 0.12 s
     assert (_calibrated_start(30, v0=0.9 * CAL_MIN_SPEED_MPS).cal_factor == 1.0).all()
     loop.reset(np.array([0]))
     assert loop.cal_open[0] and (loop.cal_factor == 1.0).all() and loop.cal_ref_factor[0] == 1.0
+    other = np.array([0.997, 1.004, 0.999, 1.003])  # the next stop's window reads its own
+    loop = _calibrated_start(30, tier="wheels+accel", scales=other, loop=loop)
+    np.testing.assert_allclose(loop.cal_factor[0] * other, other.mean(), rtol=2e-6)
+    lopsided = np.array([1.3, 1.0, 1.0, 1.0])  # beyond any sensor's error: held within 10 %
+    assert _calibrated_start(30, scales=lopsided).cal_factor[0, 0] == pytest.approx(0.9)
     assert WSPBrakingEnv(action_mode="slip_target").core.loop.scale_calibration is False
     env = WSPBrakingEnv(action_mode="slip_target", slip_target_scale_calibration=True)
     assert env.core.loop.scale_calibration is True
@@ -1099,3 +1119,29 @@ def test_the_scale_calibration_holds_every_axle_at_the_same_true_slip_on_soap():
         assert d1 < d0 - 5.0
     for (d0, *_), (d1, *_) in zip(out[0.0, False], out[0.0, True], strict=True):
         assert abs(d1 - d0) < 1e-3
+
+
+def test_the_calibrated_loop_reads_the_estimators_anchors_on_the_readings_it_judged():
+    """The drift correction reads an anchor by the estimator's own rule, which judges a wheel
+    slipping beyond the working band on the uncalibrated readings: a wheel whose reading lies
+    just beyond the band under the reference, but within it once both are calibrated, makes
+    the next period with the age at 0 an anchor (the loop's calibrated view would miss it)."""
+    core = make_core(1, accelerometer=True)
+    loop = SlipTargetLoop(
+        load_wsp_config(tier="wheels+accel"), drift_correction=True, scale_calibration=True
+    )
+    loop.bind(core)
+    loop = _calibrated_start(30, tier="wheels+accel", loop=loop)
+    f = loop.cal_factor[0]
+    assert f[1] > 1.0 > f[0]  # wheel 1's sensor reads low, wheel 0's (the fastest) high
+    v = 20.0
+    band = max(loop.active_slip, loop.active_slip_rel * v)
+    wheels = SCALES * v
+    # wheel 1 below the reference (wheel 0's reading) by the band and a bit, raw
+    wheels[1] = wheels[0] - band - 0.25 * (f[1] / f[0] - 1.0) * v
+    assert wheels[0] * f[0] - wheels[1] * f[1] < band  # within it, calibrated
+    obs = _drift_obs(core, wheels, float(wheels[0]), 0.1, 1.0)  # valves in apply, age 0.1 s
+    loop.advance(obs)
+    assert not loop.anchored[0]
+    loop.advance(_drift_obs(core, SCALES * (v - 0.006), float(wheels[0]) - 0.006, 0.0, 1.0))
+    assert loop.anchored[0]

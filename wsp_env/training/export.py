@@ -215,9 +215,9 @@ def input_spec(policy: SB3Policy) -> dict[str, Any]:
             "onset_min_s": ONSET_MIN_S,
             "onset_free_share": [float(x) for x in loop.free_share],
             # each wheel's reading (and its deceleration) times the wheels' mean reading over
-            # its own in the same window (for at least onset_min_s, above cal_min_speed_kmh;
-            # within cal_max_factor of 1), the reference times the factor of the wheel it
-            # last equalled
+            # its own in the same window (for at least onset_min_s, every wheel's mean above
+            # cal_min_speed_kmh; within cal_max_factor of 1), the reference times the factor
+            # of the wheel it last equalled; the anchors read on the uncalibrated readings
             "scale_calibration": loop.scale_calibration,
             "cal_min_speed_kmh": CAL_MIN_SPEED_MPS * 3.6,
             "cal_max_factor": CAL_MAX_FACTOR,
