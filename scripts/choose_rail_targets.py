@@ -28,7 +28,8 @@ skipped; ``--loop drift`` reads the targets of the loop with the drift correctio
 ``slip_target_<x>kmh_drift``, instead, and skips the default loop's; ``--loop drift-pgain``
 that loop's with the gain scaled by the pressure held, ``..._drift_pgain0.8x0.25``;
 ``--loop drift-onset`` with its onset reading, ``..._drift_onset``; ``--loop
-drift-onset-cal`` with the wheel-scale calibration too, ``..._drift_onset_cal``). Files
+drift-onset-cal`` with the wheel-scale calibration too, ``..._drift_onset_cal``, and
+``--loop cap0.05-drift-onset-cal`` that loop under a 5 % creep cap). Files
 whose loops ran on different classical thresholds (``slip_target_loop``: the tier's since
 2026-11-27, ``WSPConfig()``'s defaults before) are not merged.
 
@@ -60,6 +61,8 @@ LOOPS = {
     "drift-onset": "_drift_onset",
     # and the wheel-scale calibration
     "drift-onset-cal": "_drift_onset_cal",
+    # that loop under a 5 % creep cap (``--max-creep 0.05``)
+    "cap0.05-drift-onset-cal": "_creep0.05_drift_onset_cal",
 }
 
 
