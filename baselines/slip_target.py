@@ -410,8 +410,9 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         return ((v_ref[:, None] - wheels) > band[:, None]).any(axis=1)
 
     def _correct_drift(
-        self, obs: np.ndarray, v_ref: np.ndarray, age: np.ndarray, v: np.ndarray
-    ) -> np.ndarray:
+        self, obs: np.ndarray, v_ref: np.ndarray, age: np.ndarray, v: np.ndarray,
+        raw: np.ndarray | None = None,
+    ) -> np.ndarray:  # fmt: skip
         """The reference the loop tracks (m/s): the estimator's ``v_ref`` less the drift its last
         anchor showed and it did not learn, times the time since that anchor (module
         docstring), never below the fastest wheel (or ``v_ref``, where that is lower); advances
@@ -436,13 +437,12 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         dt = self.dt
         na = self.n_axles
         out_of_apply = (obs[:, self.valve_cols] < 1.0 - 1e-6).any(axis=1)
-        # at the period's start, on the readings the estimator judged (uncalibrated)
-        if self.scale_calibration:
+        # at the period's start, on the readings the estimator judged (``raw``: the observation
+        # before the wheel-scale calibration, where it runs)
+        if raw is not None:
             slipped = self._slips(self.kernel_ref, self.kernel_wheels)
-            self.kernel_ref = obs[:, 4 * na + 1].astype(np.float64) / self.cal_ref_factor
-            self.kernel_wheels = obs[:, :na].astype(np.float64) / self.cal_factor
-            self.kernel_ref *= self.v_scale
-            self.kernel_wheels *= self.v_scale
+            self.kernel_ref = raw[:, 4 * na + 1].astype(np.float64) * self.v_scale
+            self.kernel_wheels = raw[:, :na].astype(np.float64) * self.v_scale
         else:
             slipped = self._slips(self.raw_ref, self.prev_wheels)
         demand = obs[:, 4 * na] > 0.0
@@ -561,9 +561,10 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         (``(n_envs, kernel_obs_dim)``): the reference's deceleration over the period and the
         periodic release. Call it exactly once per period, before ``command``."""
         na, dt = self.n_axles, self.dt
+        raw = None
         if self.scale_calibration:  # every reading below on the calibrated scales
             self._calibrate(obs)
-            obs = self._calibrated(obs)
+            raw, obs = obs, self._calibrated(obs)
         decel = obs[:, na : 2 * na].astype(np.float64) * self.a_scale
         age = obs[:, self.age_index].astype(np.float64) * self.age_scale
         # the reference's deceleration over the period: kept through a re-anchor (its age fell,
@@ -576,7 +577,7 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         if self.onset_drift:  # the accelerometer's offset read at the stop's onset
             onset_set = self._read_onset(obs, v)
         if self.drift_correction:  # the reference the loop tracks (``_correct_drift``)
-            v_ref = self._correct_drift(obs, v_ref, age, v)
+            v_ref = self._correct_drift(obs, v_ref, age, v, raw)
             self.v_ref = v_ref
         slope = (self.prev_ref - v_ref) / dt
         known = np.isfinite(slope) & (age >= self.prev_age)
