@@ -48,7 +48,7 @@ FRESH_SEED_BASE = 9_800_000  # above the fine-tune pool's 9,510,000 + i, i < 100
 MAX_DRAW = 100_000
 
 
-def _setup(vehicle: str, tier: str) -> tuple[Any, float, dict[str, Any]]:
+def benchmark_setup(vehicle: str, tier: str) -> tuple[Any, float, dict[str, Any]]:
     """The benchmark's vehicle, time limit and other environment settings for ``tier``."""
     kw = benchmark_env_kwargs(vehicle, tier, VERSION)
     return load_vehicle(kw.pop("vehicle")), kw.pop("max_time_s"), kw
@@ -57,7 +57,7 @@ def _setup(vehicle: str, tier: str) -> tuple[Any, float, dict[str, Any]]:
 def rail_seeds(vehicle: str, tier: str, rail: str, draw: int) -> list[int]:
     """The seeds among ``FRESH_SEED_BASE + i``, ``i < draw``, whose stop is on ``rail``: each
     stop's scenario drawn as the runner draws it, without running it."""
-    veh, max_time_s, kw = _setup(vehicle, tier)
+    veh, max_time_s, kw = benchmark_setup(vehicle, tier)
     seeds = [FRESH_SEED_BASE + i for i in range(draw)]
     core = make_core(len(seeds), vehicle=veh, max_time_s=max_time_s, **kw)
     found = []
@@ -103,7 +103,7 @@ def build_policy(spec: str, tier: str) -> Any:
 
 def run(vehicle: str, tier: str, seeds: list[int], specs: list[str]) -> dict[str, list[dict]]:
     """Every policy on the stops of ``seeds``: each policy's run results, keyed by its spec."""
-    veh, max_time_s, kw = _setup(vehicle, tier)
+    veh, max_time_s, kw = benchmark_setup(vehicle, tier)
     runs = [Run(f"fresh_{s}", s, {}, dict(DAMAGE_CRITERIA), veh) for s in seeds]
     out = {}
     for spec in specs:
@@ -156,7 +156,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if not 1 <= args.draw <= MAX_DRAW:
             raise ValueError(f"--draw: must be 1-{MAX_DRAW}, got {args.draw}")
-        rails = _setup(args.vehicle, args.tier)[2]["scenario"]["rails"]
+        rails = benchmark_setup(args.vehicle, args.tier)[2]["scenario"]["rails"]
         if args.rail not in rails:
             raise ValueError(f"--rail: {args.rail!r} is not one of {', '.join(rails)}")
         for spec in args.policy:  # every policy checked before any stop runs

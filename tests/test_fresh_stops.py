@@ -114,3 +114,59 @@ def test_bad_input_is_one_line_and_no_file(tmp_path, capsys, argv, words):
     err = capsys.readouterr().err.strip()
     assert words in err and "\n" not in err and err.startswith("fresh_stops: ")
     assert not out.exists() and not list(tmp_path.iterdir())
+
+
+class _ConstantInMode:
+    """A constant slip-target action given to the environment's slip-target mode (as a model
+    file of that mode acts)."""
+
+    name = "constant"
+
+    def __init__(self, action: float) -> None:
+        self.action = action
+        self.env_kwargs = {"action_mode": "slip_target"}
+
+    def bind(self, core):
+        self.n = (core.n_envs, core.n_valves)
+
+    def reset(self, env_ids):
+        pass
+
+    def act(self, obs):
+        import numpy as np
+
+        return np.full(self.n, self.action, dtype=np.float32)
+
+
+def test_policy_targets_bins_every_decision_by_the_train_speed(capsys):
+    """scripts/policy_targets.py: a policy asking for one target always has that target in
+    every band of every rail, each stop counted in the bands its speed passed through (a stop
+    from over 40 km/h passes all three), and a table cell is None where no stop was; the
+    command's input errors are one line."""
+    import numpy as np
+    import policy_targets as pt
+
+    from wsp_env.evaluation.benchmark import DAMAGE_CRITERIA, POLICY_KEYS
+    from wsp_env.evaluation.runner import run_runs
+    from wsp_env.evaluation.suites import Run
+
+    veh, max_time_s, kw = fresh_stops.benchmark_setup("uic_z1", "wheels")
+    rec = pt.TargetRecorder(_ConstantInMode(-0.6), np.array([20.0, 40.0]))  # 2 km/h of 0.5-8
+    runs = [Run(f"s{s}", s, {"speed_kmh": v, "rail": r}, dict(DAMAGE_CRITERIA), veh)
+            for s, v, r in ((1, 60.0, "wet"), (2, 30.0, "wet"), (3, 90.0, "dry"))]  # fmt: skip
+    run_runs(veh, runs, rec, max_time_s=max_time_s, env_kwargs=kw, policy_keys=POLICY_KEYS)
+    counts = rec.counts
+    assert (counts[0] > 0).all() and (counts[2] > 0).all()  # 60 and 90 km/h: every band
+    assert counts[1, 2] == 0 and (counts[1, :2] > 0).all()  # 30 km/h: never at 40 or more
+    np.testing.assert_allclose(rec.sums[counts > 0] / counts[counts > 0], 2.0)
+    rails = [s.rail_name for s in rec.core.sim.setups]
+    out = pt.table(rails, rec.sums, rec.counts)
+    assert out["wet"][2][0] == 1 and out["wet"][0][0] == 2
+    assert out["dry"][1][1] == pytest.approx(2.0)
+    assert pt.band_names(np.array([20.0, 40.0])) == ["<20", "20-40", ">=40"]
+    capsys.readouterr()
+    assert pt.main(["--policy", "target:3", "--draw", "2"]) == 2
+    assert "not a model of the slip-target action mode" in capsys.readouterr().err
+    assert pt.main(["--policy", "target:3", "--bands", "a,b"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--bands: expected km/h edges" in err

@@ -282,6 +282,7 @@ def test_slip_target_student_is_the_imitation_start_handed_over(tmp_path):
         "action_mode": "slip_target",
         "action_repeat": 4,
         "memory_features": True,
+        "memory_target_mean": True,  # the student's own mean target observed
         "stagger_reset_steps": 20,
         "scenario": {"speed_kmh": [30, 50], "rails": {"soap": 0.5, "leaves": 0.5}},
     }

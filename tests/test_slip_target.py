@@ -271,11 +271,17 @@ def test_action_maps_to_targets_is_clipped_and_observed():
 
 
 @pytest.mark.parametrize(
-    "kwargs", [{"vehicle": "etr1000"}, {"valve_group": "bogie"}, {"accelerometer": True}]
+    "kwargs",
+    [
+        {"vehicle": "etr1000"},
+        {"valve_group": "bogie", "memory_target_mean": True},
+        {"accelerometer": True},
+    ],
 )
 def test_gymnasium_and_sb3_checkers_pass_with_memory_features(kwargs):
     """Slip-target mode with memory features on a multi-car train, bogie valves (a valve of two
-    axles asks for its most cautious axle's request) and the accelerometer tier's thresholds."""
+    axles asks for its most cautious axle's request; with the stop's mean target, one per
+    valve) and the accelerometer tier's thresholds."""
     from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
     def make():
@@ -561,7 +567,7 @@ def test_training_config_and_trained_model_carry_the_mode(tmp_path):
     env_kwargs = {
         "vehicle": "uic_z1", "action_mode": "slip_target", "slip_target_max_kmh": 6.0,
         "slip_target_lead_s": 0.05, "memory_features": True, "stagger_reset_steps": 20,
-        "action_repeat": 2, "scenario": {"speed_kmh": [30, 40]},
+        "action_repeat": 2, "scenario": {"speed_kmh": [30, 40]}, "memory_target_mean": True,
     }  # fmt: skip
     cfg = load_train_config(train_config(tmp_path, n_timesteps=256, env_kwargs=env_kwargs))
     assert cfg.env_kwargs["action_mode"] == "slip_target"
@@ -587,6 +593,7 @@ def test_training_config_and_trained_model_carry_the_mode(tmp_path):
     assert policy.env_kwargs["slip_target_drift_correction"] is False
     assert policy.env_kwargs["slip_target_gain_scale_floor"] == 1.0
     assert policy.env_kwargs["slip_target_onset_drift"] is False
+    assert policy.env_kwargs["memory_target_mean"] is True
     meta = model_metadata(out / "best_model.zip")
     del meta["env_kwargs"]["slip_target_gain_scale_floor"]
     del meta["env_kwargs"]["slip_target_onset_drift"]
@@ -645,7 +652,8 @@ def test_training_config_and_trained_model_carry_the_mode(tmp_path):
     assert json.loads(meta["env_kwargs"])["action_repeat"] == 2
     inputs = json.loads(meta["inputs"])
     assert inputs["action_repeat"] == 2 and inputs["decision_period_s"] == pytest.approx(0.04)
-    assert inputs["obs_dim"] == int(meta["obs_dim"]) == 23 + 3 * 4 + 4
+    assert inputs["obs_dim"] == int(meta["obs_dim"]) == 23 + 3 * 4 + 4 + 4
+    assert inputs["memory_target_mean"] == {"periods": "control", "initial": 1.0}
     memory = inputs["memory_features"]
     assert (memory["time_scale_s"], memory["energy_scale_MJ"]) == (10.0, 1.0)
     assert memory["release_fraction"] == pytest.approx(0.05)

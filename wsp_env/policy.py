@@ -283,7 +283,7 @@ POLICY_ENV_KWARGS = (
     "slip_target_min_kmh", "slip_target_max_kmh", "slip_target_gain_per_kmh",
     "slip_target_lead_s", "slip_target_release", "slip_target_max_creep",
     "slip_target_drift_correction", "slip_target_gain_scale_floor", "slip_target_onset_drift",
-    "slip_target_scale_calibration", "memory_features",
+    "slip_target_scale_calibration", "memory_features", "memory_target_mean",
 )  # fmt: skip
 # the slip-target loop's periodic-release gate of a model file that does not name it: written
 # before the gate existed (2026-11-27), trained and judged with the ungated loop

@@ -167,6 +167,7 @@ class BrakingCore:
         slip_target_max_kmh: float = 8.0,
         slip_target_loop: Any = None,
         memory_features: bool = False,
+        memory_target_mean: bool = False,
     ) -> None:
         if isinstance(n_envs, bool) or not isinstance(n_envs, int | np.integer) or n_envs < 1:
             raise ValueError(f"n_envs: must be a positive integer, got {n_envs!r}")
@@ -204,6 +205,15 @@ class BrakingCore:
             )
         if not isinstance(memory_features, bool | np.bool_):
             raise ValueError(f"memory_features: must be True or False, got {memory_features!r}")
+        if not isinstance(memory_target_mean, bool | np.bool_):
+            raise ValueError(
+                f"memory_target_mean: must be True or False, got {memory_target_mean!r}"
+            )
+        if memory_target_mean and action_mode != "slip_target":
+            raise ValueError(
+                "memory_target_mean: observes the stop's mean slip target, so it needs "
+                f"action_mode 'slip_target', got {action_mode!r}"
+            )
         self.vehicle = veh
         self.reward = _config(RewardConfig, reward, "reward")
         self.scenario = _config(ScenarioConfig, scenario, "scenario")
@@ -241,9 +251,12 @@ class BrakingCore:
         slip_target = action_mode == "slip_target"
         self.memory_features = bool(memory_features)
         memory_dim = 3 * self.n_axles if self.memory_features else 0
+        self.memory_target_mean = bool(memory_target_mean)
+        target_dim = self.n_valves if self.memory_target_mean else 0
         tail = self.n_valves if residual or slip_target else 0
-        self.obs_dim = kernel_dim + memory_dim + tail
-        # the observation beyond the kernel's: memory features, then the action mode's tail
+        self.obs_dim = kernel_dim + memory_dim + target_dim + tail
+        # the observation beyond the kernel's: memory features, the stop's mean slip target,
+        # then the action mode's tail
         self._extended = self.obs_dim > kernel_dim
         self.terms = np.zeros((n_envs, K.N_TERMS))
         self.flags = np.zeros((n_envs, K.N_F), dtype=np.int64)
@@ -290,6 +303,9 @@ class BrakingCore:
             self.memory_slide_s = np.zeros((n_envs, self.n_axles))
             self.memory_since_release_s = np.zeros((n_envs, self.n_axles))
             self.memory_energy_J = np.zeros((n_envs, self.n_axles))
+        if self.memory_target_mean:  # the sum of the agent's targets (as actions) and periods
+            self.memory_target_sum = np.zeros((n_envs, self.n_valves))
+            self.memory_target_periods = np.zeros(n_envs)
         # slip-target mode: the inner loop (``slip_target_loop``, ``baselines.slip_target``;
         # ``envs.make_core`` supplies it) advances once per period, as the residual's base does,
         # and turns each period's targets into valve commands; ``slip_action``: the agent's last
@@ -360,6 +376,9 @@ class BrakingCore:
         self._obs_full[:, :width] = self._kobs
         if self.memory_features:
             self._obs_full[:, width : width + 3 * self.n_axles] = self.memory_obs()
+            width += 3 * self.n_axles
+        if self.memory_target_mean:
+            self._obs_full[:, width : width + self.n_valves] = self.target_mean_obs()
         tail = self._tail()
         if tail is not None:
             self._obs_full[:, self.obs_dim - tail.shape[1] :] = tail
@@ -386,6 +405,17 @@ class BrakingCore:
             self.memory_energy_J[rows] * 1e-6 / MEMORY_ENERGY_SCALE_MJ,
         )
         return np.clip(np.concatenate(parts, axis=-1), -K.OBS_CLIP, K.OBS_CLIP)
+
+    def target_mean_obs(self, rows: Any = slice(None)) -> np.ndarray:
+        """``memory_target_mean``: the stop's mean slip-target action of environments ``rows``
+        so far ``(len(rows), n_valves)``, per valve, over the control periods stepped since the
+        reset (each period's clipped action, as the tail shows it); before the first period the
+        tail's own value (1: no target asked for yet). A WSP's memory of what it asked for: a
+        policy that reads the rail early in the stop keeps what it read (``WSPBrakingEnv``'s
+        docstring)."""
+        n = self.memory_target_periods[rows]
+        mean = self.memory_target_sum[rows] / np.maximum(n, 1.0)[..., None]
+        return np.where((n > 0.0)[..., None], mean, self.slip_action[rows])
 
     def _update_memory(self, rows: Any = slice(None)) -> None:
         """Advance the memory features of ``rows`` by the period just stepped, from what the
@@ -431,6 +461,8 @@ class BrakingCore:
         parts = [self._kobs[e]]
         if self.memory_features:
             parts.append(self.memory_obs(e))  # its row only
+        if self.memory_target_mean:
+            parts.append(self.target_mean_obs(e))
         tail = self._tail()
         if tail is not None:
             parts.append(tail[e])
@@ -514,6 +546,9 @@ class BrakingCore:
             self.memory_slide_s[e] = 0.0
             self.memory_since_release_s[e] = 0.0
             self.memory_energy_J[e] = 0.0
+        if self.memory_target_mean:
+            self.memory_target_sum[e] = 0.0
+            self.memory_target_periods[e] = 0.0
         if self.loop is not None:
             self.slip_action[e] = 1.0
         if self._extended:
@@ -618,6 +653,9 @@ class BrakingCore:
             self.flags[:, K.F_CLIPPED] = clipped
         if self.loop is not None:
             self.slip_action[...] = np.clip(given, -1.0, 1.0)
+        if self.memory_target_mean:
+            self.memory_target_sum += self.slip_action
+            self.memory_target_periods += 1.0
         if self.memory_features:
             self._update_memory()
         if self._extended:
@@ -714,6 +752,9 @@ class BrakingCore:
         self.sim.cmd[e] = cmd  # the period's commands, for the estimator's next update
         if self.loop is not None:
             self.slip_action[e] = np.clip(np.asarray(actions, dtype=float)[e], -1.0, 1.0)
+        if self.memory_target_mean:
+            self.memory_target_sum[e] += self.slip_action[e]
+            self.memory_target_periods[e] += 1.0
         if self.mode == K.MODE_CONTINUOUS:
             self.prev_action[e] = np.clip(self.compose(actions)[0][e], -1.0, 1.0)
         else:
@@ -723,6 +764,7 @@ class BrakingCore:
     # ---- state (checkpoints: a resumed training run continues bit for bit) -----------------
 
     _MEMORY_ARRAYS = ("memory_slide_s", "memory_since_release_s", "memory_energy_J")
+    _TARGET_MEAN_ARRAYS = ("memory_target_sum", "memory_target_periods")
     _STATE_ARRAYS = ("_kobs", "terms", "flags", "wsp", "axle_wsp", "sensor_par", "sensor_rng",
                      "prev_wheel", "prev_action", "episode_return", "episode_terms")  # fmt: skip
     _SIM_ARRAYS = ("env_par", "axle_par", "sections", "env_state", "axle_state", "field",
@@ -759,6 +801,8 @@ class BrakingCore:
             }
         if self.memory_features:
             state["memory"] = {k: getattr(self, k).copy() for k in self._MEMORY_ARRAYS}
+        if self.memory_target_mean:
+            state["target_mean"] = {k: getattr(self, k).copy() for k in self._TARGET_MEAN_ARRAYS}
         return state
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
@@ -804,6 +848,9 @@ class BrakingCore:
         if self.memory_features:
             for k in self._MEMORY_ARRAYS:
                 getattr(self, k)[...] = state["memory"][k]
+        if self.memory_target_mean:
+            for k in self._TARGET_MEAN_ARRAYS:
+                getattr(self, k)[...] = state["target_mean"][k]
 
     def episode_info(self, e: int) -> dict[str, Any]:
         metrics = run_metrics(self.sim, e)

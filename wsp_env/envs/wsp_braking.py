@@ -102,11 +102,12 @@ wheel that rolls freely (brake off 0.3 s, not spinning up).
 | ``memory_features=True``: next ``n`` | time in the current slide of axle ``i``: how long its measured slip ``v_ref - v_i`` has stayed above the metrics' slide threshold ``max(3 km/h, 20 % v_ref)`` (the classical WSP's is 3.1 km/h, 18 %), 0 when it is below | s | ``/ 10 s``, clipped |
 | ``memory_features=True``: next ``n`` | time since axle ``i``'s last release (its valve's command, as the watchdog let it through, under the watchdog's release fraction, 5 %, of the demand) or the stop's start | s | ``/ 10 s``, clipped |
 | ``memory_features=True``: next ``n`` | axle ``i``'s sliding-energy **estimate**: the sum over periods of ``F_i max(v_ref - v_i, 0) dt``, ``F_i`` the brake force at the rail from the observed cylinder pressure and the vehicle's brake constants (``gain (p_i - p_threshold)^+ / r`` at the pads' nominal friction for ``v_ref``: the stop's pad scale is unknown to a WSP) | MJ | ``/ 1 MJ``, clipped (at 5 MJ) |
+| ``memory_target_mean=True`` (slip-target mode): next ``m`` | valve ``j``'s mean slip-target action over the stop's control periods so far (the agent's clipped actions, the tail's values; the tail's own value, 1, before the first period) | - | as actions in ``[-1, 1]`` |
 | ``action_mode="residual"``: last ``m`` | the classical WSP's requests for this period | - | as actions in ``[-1, 1]`` |
 | ``action_mode="slip_target"``: last ``m`` | the agent's last action (the slip targets in force), clipped; 1 at a stop's start | - | as actions in ``[-1, 1]`` |
 
 So ``obs_dim = 4n + 3 + m (+ 1 + 2n privileged) (+ 1 accelerometer) (+ 3n memory) (+ m
-residual or slip_target)``: 23 for the 4-axle ``uic_z1`` with per-axle valves.
+target mean) (+ m residual or slip_target)``: 23 for the 4-axle ``uic_z1`` with per-axle valves.
 
 The memory features are what a WSP can keep of the past from what it measures, so that the
 damage term (a function of each axle's cumulative sliding energy) is a function of what is
@@ -126,6 +127,14 @@ the lowest adhesion), which the reference's fall below the train (no wheel to an
 partly offsets. The observed channel clips at 5 MJ, which locked axles pass on soap from
 120 km/h (up to 9 MJ there; 2.2 MJ from 60 km/h); the core's ``memory_energy_J`` does not clip
 (``tests/test_memory_features.py``).
+
+The stop's mean slip target (``memory_target_mean``) is the policy's own memory of what it
+asked for: a learned policy that reads the rail while the train is fast (a leaves stop's
+targets are not a soap stop's) sees much the same observation on every rail near standstill,
+where the adhesion of most rails rises, and without it forgets what it read (a student of the
+rail-table teacher asks 4.0-4.2 km/h on leaves below 40 km/h where its teacher asks 2:
+docs/training.md, "The stop's mean slip target"). It is zero-cost to a WSP (two sums per valve)
+and, like the memory features, starts anew at each reset.
 
 ## Safety watchdog
 
@@ -254,6 +263,7 @@ num_envs=N, **kwargs)``:
 | ``slip_target_scale_calibration`` | bool | ``False`` | slip-target mode, either tier: the loop reads each wheel-speed sensor's scale against the wheels' mean while every cylinder is still under its brake's threshold at the stop's start (every wheel rolls with the train) and divides it out of the wheels' readings and the estimator's reference (a BCU's wheel-diameter calibration; docs/training.md, "The wheel-scale calibration"); a policy file that does not name it loads with ``False`` |
 | ``stagger_reset_steps`` | int | ``0`` | vector class only (the single class takes only 0), a training option: ``reset`` advances each environment a random, seeded number of steps below this into a stop, driven by the classical WSP, so that stops do not all end together (``WSPBrakingVectorEnv``'s docstring); 0: off |
 | ``memory_features`` | bool | False | append the memory features (Observation Space): per axle time in the current slide, time since the last release, sliding-energy estimate |
+| ``memory_target_mean`` | bool | False | slip-target mode (an error in the others): append each valve's mean slip-target action over the stop so far (Observation Space); a policy file that does not name it loads with ``False`` |
 | ``substep_s`` | float | ``0.001`` | the physics substep (linearly implicit; docs/physics.md) |
 | ``max_time_s`` | float | ``300.0`` | truncation after ``ceil(max_time_s / control_period_s)`` steps (Episode End) |
 | ``render_mode`` | str or None | None | ``"rgb_array"``: ``render()`` returns a frame, ``(480, 640, 3)`` uint8, of the last 10 s (wheel speeds against the train and the reference, slips, cylinder pressures against the demand; one figure reused, > 50 frames/s); ``"human"``: the same in a matplotlib window, updated at every step (with a non-interactive backend, e.g. ``MPLBACKEND=Agg`` or no display, drawn but not shown); ``wsp_env.envs.rendering`` |
@@ -333,6 +343,9 @@ num_envs=N, **kwargs)``:
 * v3, 2026-12-06 (no new version; off by default): the slip-target loop may calibrate the
   wheel-speed sensors' scales at the stop's onset (``slip_target_scale_calibration``). A
   policy file that does not name it loads with ``False``.
+* v3, 2026-12-07 (no new version; off by default, the observation unchanged without it): the
+  stop's mean slip target may be observed (``memory_target_mean``, slip-target mode). A policy
+  file that does not name it loads with ``False``.
 """
 
 from __future__ import annotations
@@ -503,6 +516,7 @@ class WSPBrakingEnv(gym.Env):
         slip_target_onset_drift: bool = DEFAULT_ONSET_DRIFT,
         slip_target_scale_calibration: bool = DEFAULT_SCALE_CALIBRATION,
         memory_features: bool = False,
+        memory_target_mean: bool = False,
         stagger_reset_steps: int = 0,
     ) -> None:
         if render_mode not in (None, *self.metadata["render_modes"]):
@@ -532,7 +546,7 @@ class WSPBrakingEnv(gym.Env):
             slip_target_gain_scale_floor=slip_target_gain_scale_floor,
             slip_target_onset_drift=slip_target_onset_drift,
             slip_target_scale_calibration=slip_target_scale_calibration,
-            memory_features=memory_features,
+            memory_features=memory_features, memory_target_mean=memory_target_mean,
         )  # fmt: skip
         self.action_space = self.core.action_space()
         self.observation_space = self.core.observation_space()
@@ -697,6 +711,7 @@ class WSPBrakingVectorEnv(VectorEnv):
         slip_target_onset_drift: bool = DEFAULT_ONSET_DRIFT,
         slip_target_scale_calibration: bool = DEFAULT_SCALE_CALIBRATION,
         memory_features: bool = False,
+        memory_target_mean: bool = False,
         stagger_reset_steps: int = 0,
     ) -> None:
         if render_mode not in (None, *self.metadata["render_modes"]):
@@ -728,7 +743,7 @@ class WSPBrakingVectorEnv(VectorEnv):
             slip_target_gain_scale_floor=slip_target_gain_scale_floor,
             slip_target_onset_drift=slip_target_onset_drift,
             slip_target_scale_calibration=slip_target_scale_calibration,
-            memory_features=memory_features,
+            memory_features=memory_features, memory_target_mean=memory_target_mean,
         )  # fmt: skip
         self.num_envs = num_envs
         self.render_mode = render_mode

@@ -15,7 +15,8 @@ WSP's request (``env.py``): the embedded WSP runs the classical logic beside the
 ``action_mode="slip_target"`` it is each valve's target slip (the environment's mapping), and
 the embedded WSP runs the slip-target inner loop (``baselines.slip_target``) beside it; with
 ``memory_features`` the embedded WSP computes those inputs as the environment does
-(``BrakingCore.memory_obs``).
+(``BrakingCore.memory_obs``), with ``memory_target_mean`` the stop's mean slip-target action
+(``BrakingCore.target_mean_obs``).
 
 The ONNX metadata carries what rebuilding the inputs and using the output takes:
 ``env_kwargs`` (the model's environment settings, ``action_repeat`` included) and ``inputs``
@@ -183,6 +184,11 @@ def input_spec(policy: SB3Policy) -> dict[str, Any]:
             "pad_slope_per_mps": float(env_par[L.EP_PAD_SLOPE]),
             "pad_ref_speed_mps": float(env_par[L.EP_PAD_VREF]),
         }
+    if core.memory_target_mean:
+        # after the memory features (n_valves entries): each valve's mean of the slip-target
+        # actions (clipped to [-1, 1]) over the stop's control periods so far, the tail's value
+        # before the first
+        spec["memory_target_mean"] = {"periods": "control", "initial": 1.0}
     if core.loop is not None:
         loop = core.loop
         spec["slip_target"] = {
