@@ -148,6 +148,11 @@ DEFAULT_GAIN_PER_KMH = 0.2  # the loop's fixed gain by default
 DEFAULT_GAIN_SCALE_FLOOR = 1.0
 DEFAULT_ONSET_DRIFT = False
 DEFAULT_SCALE_CALIBRATION = False
+DEFAULT_ONSET_TWO_SIDED = False
+# the two-sided onset reading (``onset_two_sided``): the estimator's reference is held up by a
+# wheel when it is within this of the fastest reading (m/s: 0.1 km/h, the wheel sensors' noise
+# and resolution)
+REF_HELD_TOL_MPS = 0.1 / 3.6
 # the drift correction reads a rate from an anchor's jump only over at least this long (s)
 DRIFT_MIN_SPAN_S = 0.5
 # the onset reading (``onset_drift``) needs every cylinder under its brake's threshold for at
@@ -214,6 +219,20 @@ def check_onset_drift(onset_drift: Any, drift_correction: bool) -> bool:
     return bool(onset_drift)
 
 
+def check_onset_two_sided(two_sided: Any, onset_drift: bool) -> bool:
+    """The two-sided onset reading's switch as a bool, or a one-line ``ConfigError`` naming the
+    environment argument ``slip_target_onset_two_sided`` (true or false; true only with the
+    onset reading, whose other sense it adds)."""
+    if not isinstance(two_sided, (bool, np.bool_)):
+        raise ConfigError(f"slip_target_onset_two_sided: must be true or false, got {two_sided!r}")
+    if two_sided and not onset_drift:
+        raise ConfigError(
+            "slip_target_onset_two_sided: needs slip_target_onset_drift (it adds that "
+            "reading's other sense)"
+        )
+    return bool(two_sided)
+
+
 def check_drift_correction(drift_correction: Any) -> bool:
     """The drift correction's switch as a bool, or a one-line ``ConfigError`` naming the
     environment argument ``slip_target_drift_correction`` (true or false; a number or a
@@ -263,7 +282,10 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
     accelerometer: ``bind`` refuses a core without one); ``gain_scale_floor``: the gain times
     the pressure held over the demand, never below this (1: a fixed gain; module
     docstring); ``onset_drift``: with the drift correction, its drift read at the stop's start
-    as well (``_read_onset``); ``scale_calibration``: each wheel-speed reading's scale, relative
+    as well (``_read_onset``); ``onset_two_sided``: with the onset reading, its other sense too
+    (a reading of too much deceleration), the tracked reference raised only while no wheel
+    holds the estimator's up (``_correct_drift``); ``scale_calibration``: each wheel-speed
+    reading's scale, relative
     to the wheels' mean, read while every wheel rolls free at the stop's start and divided out
     (``_calibrate``; either tier)."""
 
@@ -281,6 +303,7 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         gain_scale_floor: float = DEFAULT_GAIN_SCALE_FLOOR,
         onset_drift: bool = DEFAULT_ONSET_DRIFT,
         scale_calibration: bool = DEFAULT_SCALE_CALIBRATION,
+        onset_two_sided: bool = DEFAULT_ONSET_TWO_SIDED,
     ) -> None:
         self.wsp_given = wsp  # None: the bound core's tier's thresholds (``bind``)
         self.cfg = wsp or WSPConfig()
@@ -291,6 +314,7 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         self.gain_scale_floor = check_gain_scale_floor(gain_scale_floor)
         self.onset_drift = check_onset_drift(onset_drift, self.drift_correction)
         self.scale_calibration = check_scale_calibration(scale_calibration)
+        self.onset_two_sided = check_onset_two_sided(onset_two_sided, self.onset_drift)
 
     def bind(self, core: Any) -> None:
         """Attach to a ``BrakingCore``: its scales, valve map and batch size."""
@@ -341,6 +365,9 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         self.since_anchor = np.zeros(n)
         self.drift = np.zeros(n)
         self.anchored = np.zeros(n, dtype=bool)  # the estimator anchored in the last period
+        # the time since no wheel held the estimator's reference up or it anchored (s): what
+        # an upward correction multiplies with ``onset_two_sided``
+        self.unheld_s = np.zeros(n)
         # a rate read from an anchor's jump since the stop began (the onset reading yields)
         self.rate_read = np.zeros(n, dtype=bool)
         # the onset reading (``onset_drift``): the accelerometer's reading column, each axle's
@@ -384,6 +411,7 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         self.prev_wheels[env_ids] = 0.0
         self.anchored[env_ids] = False
         self.since_anchor[env_ids] = 0.0
+        self.unheld_s[env_ids] = 0.0
         self.drift[env_ids] = 0.0
         self.rate_read[env_ids] = False
         self.onset_open[env_ids] = True
@@ -463,7 +491,14 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         self.raw_decel = np.where(anchored | ~known, self.raw_decel, (self.raw_ref - v_ref) / dt)
         self.raw_ref, self.prev_wheels = v_ref, v  # fresh arrays of ``advance``'s
         corrected = v_ref - self.drift * since
-        return np.maximum(corrected, np.minimum(v.max(axis=1), v_ref))
+        fastest = v.max(axis=1)
+        if self.onset_two_sided:  # a drift down (the reference below the train) is made up
+            # only for the time no wheel has held the estimator's reference up: a wheel within
+            # REF_HELD_TOL_MPS of it, or an anchor, restarts that time
+            held = (v_ref <= fastest + REF_HELD_TOL_MPS) | anchored
+            self.unheld_s = np.where(held, 0.0, self.unheld_s + dt)
+            corrected = np.where(self.drift < 0.0, v_ref - self.drift * self.unheld_s, corrected)
+        return np.maximum(corrected, np.minimum(fastest, v_ref))
 
     def _read_onset(self, obs: np.ndarray, v: np.ndarray) -> np.ndarray | None:
         """The onset reading (``onset_drift``; module docstring): while every cylinder is under
@@ -474,7 +509,10 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         jump has been read yet, the drift the correction takes away becomes the rate at which
         that offset carries the aided reference above the train: ``max(0, wheels' deceleration
         - reading)``, within ``ACC_CORR_MAX``. Only that sense: a reading of too much
-        deceleration carries the reference down, where the fastest wheel holds it up. Returns
+        deceleration carries the reference down, where the fastest wheel holds it up — unless
+        every wheel slides below it; ``onset_two_sided`` reads that sense too (``wheels -
+        reading`` within ``+-ACC_CORR_MAX``), made up only while no wheel holds the reference
+        up (``_correct_drift``). Returns
         where the drift was set (the tracked reference steps down there: no fall of the
         train), or None once every environment's window has closed (nothing left to read)."""
         if not self.onset_open.any():
@@ -496,7 +534,8 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         use = closing & (span >= ONSET_MIN_S - 1e-9) & ~self.rate_read
         wheels = (self.onset_v0 - self.onset_v) / np.maximum(span, 1e-9)
         reading = self.onset_acc / np.maximum(self.onset_n, 1.0)
-        rate = np.clip(wheels - reading, 0.0, K.ACC_CORR_MAX)
+        low = -K.ACC_CORR_MAX if self.onset_two_sided else 0.0
+        rate = np.clip(wheels - reading, low, K.ACC_CORR_MAX)
         self.drift = np.where(use, rate, self.drift)
         self.onset_open &= free
         return use
@@ -645,8 +684,9 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
 def loop_suffix(loop: SlipTargetLoop) -> str:
     """What a policy's name adds for a loop whose settings are not the defaults:
     ``_<release>`` for the gate, ``_creep<x>`` for the cap, ``_drift`` for the drift correction,
-    ``_onset`` for its onset reading, ``_pgain<gain>x<floor>`` for a gain scaled by the pressure
-    held, ``_gain<gain>`` for another fixed gain, ``_cal`` for the wheel-scale calibration
+    ``_onset`` for its onset reading (``_onset2`` two-sided), ``_pgain<gain>x<floor>`` for a
+    gain scaled by the pressure held, ``_gain<gain>`` for another fixed gain, ``_cal`` for the
+    wheel-scale calibration
     (``""`` for the default loop), so that two loops never share a name."""
     gate = "" if loop.release == DEFAULT_RELEASE else f"_{loop.release}"
     cap = "" if loop.max_creep == DEFAULT_MAX_CREEP else f"_creep{loop.max_creep:g}"
@@ -656,6 +696,7 @@ def loop_suffix(loop: SlipTargetLoop) -> str:
     elif loop.gain_per_kmh != DEFAULT_GAIN_PER_KMH:
         scaled = f"_gain{loop.gain_per_kmh:g}"
     drift = ("_drift" if loop.drift_correction else "") + ("_onset" if loop.onset_drift else "")
+    drift += "2" if loop.onset_two_sided else ""  # the onset reading's both senses
     cal = "_cal" if loop.scale_calibration else ""
     return gate + cap + drift + scaled + cal
 

@@ -12,7 +12,8 @@ distance to it. ``--policy`` is ``classical`` (the tier's
 frozen classical WSP), ``target:X`` (a constant X km/h target on the slip-target loop of the
 tier, the environment's default loop), ``target:X:drift`` (the same with the loop's drift
 correction, ``wheels+accel`` only; ``target:X:drift:onset`` with its onset reading of the
-accelerometer's offset), ``target:X[:drift]:GxF`` (with the loop's gain G per km/h
+accelerometer's offset, ``target:X:drift:onset2`` with that reading two-sided),
+``target:X[:drift]:GxF`` (with the loop's gain G per km/h
 scaled by the pressure held, never below F of it: ``target:2:drift:0.8x0.25``), each with
 ``:cal`` last for the loop's wheel-scale calibration (either tier: ``target:2:cal``,
 ``target:2:drift:onset:cal``), or anything
@@ -81,10 +82,13 @@ def build_policy(spec: str, tier: str) -> Any:
         items = items[:-1] if cal else items
         drift = items[:1] == ["drift"]
         rest = items[1:] if drift else items
-        onset = drift and rest[:1] == ["onset"]
+        onset = drift and rest[:1] in (["onset"], ["onset2"])
+        two_sided = onset and rest[0] == "onset2"
         rest = rest[1:] if onset else rest
         if len(rest) > 1 or (rest and "x" not in rest[0]):
-            raise ValueError(f"--policy {spec}: target:X[:drift[:onset]][:GAINxFLOOR][:cal]")
+            raise ValueError(
+                f"--policy {spec}: target:X[:drift[:onset|:onset2]][:GAINxFLOOR][:cal]"
+            )
         gain, floor = parse_pressure_gain(rest[0] if rest else "off", f"--policy {spec}")
         if drift and tier != "wheels+accel":
             raise ValueError(f"--policy {spec}: the drift correction needs --tier wheels+accel")
@@ -96,7 +100,8 @@ def build_policy(spec: str, tier: str) -> Any:
             raise ValueError(f"--policy {spec}: a target in [0, 30] km/h")
         # the bound core's tier's loop
         loop = SlipTargetLoop(drift_correction=drift, gain_per_kmh=gain, gain_scale_floor=floor,
-                              onset_drift=onset, scale_calibration=cal)  # fmt: skip
+                              onset_drift=onset, scale_calibration=cal,
+                              onset_two_sided=two_sided)  # fmt: skip
         return SlipTargetPolicy(kmh, loop)
     return make_policy(spec, tier=tier)
 

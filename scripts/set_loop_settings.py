@@ -2,7 +2,9 @@
 release's gate (``--release``: ``slip_target_release``, ``working`` or ``always``), the creep
 cap (``--max-creep``: ``slip_target_max_creep``, 0-1, 0 no cap), the drift correction
 (``--drift-correction on|off``: ``slip_target_drift_correction``, an accelerometer model's; and
-``--onset-drift on|off``, its onset reading, ``slip_target_onset_drift``), the wheel-scale
+``--onset-drift on|off``, its onset reading, ``slip_target_onset_drift``, and
+``--onset-two-sided on|off``, that reading's other sense, ``slip_target_onset_two_sided``), the
+wheel-scale
 calibration (``--scale-calibration on|off``: ``slip_target_scale_calibration``) and
 the gain (``--pressure-gain off|GxF``: ``slip_target_gain_per_kmh`` and
 ``slip_target_gain_scale_floor``, off the fixed 0.2 per km/h, GxF G per km/h times the pressure
@@ -65,6 +67,11 @@ def main(argv: list[str] | None = None) -> int:
         help="the drift-corrected loop's onset reading of the accelerometer's offset",
     )
     ap.add_argument(
+        "--onset-two-sided",
+        choices=("on", "off"),
+        help="the onset reading's other sense too (a reading of too much deceleration)",
+    )
+    ap.add_argument(
         "--scale-calibration",
         choices=("on", "off"),
         help="the loop's calibration of the wheel-speed sensors' scales at the stop's onset",
@@ -91,6 +98,8 @@ def main(argv: list[str] | None = None) -> int:
             settings["slip_target_onset_drift"] = args.onset_drift == "on"
         if args.scale_calibration is not None:
             settings["slip_target_scale_calibration"] = args.scale_calibration == "on"
+        if args.onset_two_sided is not None:
+            settings["slip_target_onset_two_sided"] = args.onset_two_sided == "on"
         if args.pressure_gain is not None:
             gain, floor = parse_pressure_gain(
                 args.pressure_gain, f"--pressure-gain {args.pressure_gain}"
@@ -100,7 +109,7 @@ def main(argv: list[str] | None = None) -> int:
         if not settings:
             raise ValueError(
                 "nothing to set: give --release, --max-creep, --drift-correction, "
-                "--onset-drift, --scale-calibration and/or --pressure-gain"
+                "--onset-drift, --onset-two-sided, --scale-calibration and/or --pressure-gain"
             )
         if args.out.suffix != ".zip":
             raise ValueError(f"{args.out}: the copy must be a .zip model file")
@@ -117,6 +126,13 @@ def main(argv: list[str] | None = None) -> int:
             raise ValueError(
                 f"{args.model}: the onset reading needs the drift correction "
                 "(--drift-correction on)"
+            )
+        if kw_after.get("slip_target_onset_two_sided") and not kw_after.get(
+            "slip_target_onset_drift"
+        ):
+            raise ValueError(
+                f"{args.model}: the two-sided onset reading needs the onset reading "
+                "(--onset-drift on)"
             )
         if settings.get("slip_target_drift_correction") and not meta["env_kwargs"].get(
             "accelerometer"

@@ -15,11 +15,14 @@ until then: the wheels tier's 2.0 m/s^2 recovery hold and 3 s release interval w
         [--target 2 --target 6] [--runs 300] [--stops development] [--vehicle regiolis] \\
         [--json runs/bench/slip_constant.json] [--rail-teacher] [--release always] \\
         [--max-creep 0 --max-creep 0.2] [--drift-correction on [--onset-drift on]] \\
-        [--pressure-gain 0.8x0.25] [--scale-calibration on]
+        [--pressure-gain 0.8x0.25] [--scale-calibration on] [--onset-two-sided on] \
+        [--teacher-table configs/train/ppo_bc_slip_target_cal_accel_uic_z1.yaml]
 
 ``--rail-teacher`` adds ``baselines.oracle.SlipTargetOracle``: the privileged teacher of the
 imitation start (``oracle_target_rail``: each stop's constant target picked by its rail, which
-the sensors do not measure), through the same loop.
+the sensors do not measure), through the same loop; ``--teacher-table CONFIG`` (implies it)
+gives it a training config's table (``pretrain.teacher_targets_kmh``) instead of
+``oracle.RAIL_TARGETS_KMH``.
 """
 
 from __future__ import annotations
@@ -29,9 +32,11 @@ import json
 import sys
 from pathlib import Path
 
+import yaml
+
 from wsp_env import BENCHMARK_VEHICLES
 from wsp_env.baselines.classical import WSPConfig, load_wsp_config
-from wsp_env.baselines.oracle import SlipTargetOracle
+from wsp_env.baselines.oracle import SlipTargetOracle, SlipTargetTeacher
 from wsp_env.baselines.slip_target import (
     DEFAULT_MAX_CREEP,
     DEFAULT_RELEASE,
@@ -94,6 +99,18 @@ def main(argv: list[str] | None = None) -> int:
         "(either tier; repeatable: each target under each; default off)",
     )
     ap.add_argument(
+        "--onset-two-sided",
+        action="append",
+        choices=("off", "on"),
+        help="the onset reading's other sense too (needs --onset-drift on; repeatable; "
+        "default off)",
+    )
+    ap.add_argument(
+        "--teacher-table",
+        help="a training config whose pretrain.teacher_targets_kmh the rail teacher asks for "
+        "(implies --rail-teacher)",
+    )
+    ap.add_argument(
         "--pressure-gain",
         action="append",
         help="the loop's gain: off (a fixed 0.2 per km/h) or GxF, G per km/h times the pressure "
@@ -108,7 +125,8 @@ def main(argv: list[str] | None = None) -> int:
         "or WSPConfig()'s defaults (this script before 2026-11-27)",
     )
     args = ap.parse_args(argv)
-    targets = args.target or [4.25]
+    # with --teacher-table alone, only the teacher runs
+    targets = args.target or ([] if args.teacher_table else [4.25])
     if any(not 0.0 <= t <= 30.0 for t in targets):
         print("--target: a sliding speed in [0, 30] km/h", file=sys.stderr)
         return 2
@@ -122,6 +140,25 @@ def main(argv: list[str] | None = None) -> int:
         print("--onset-drift on: needs --drift-correction on (only)", file=sys.stderr)
         return 2
     cals = [c == "on" for c in args.scale_calibration or ["off"]]
+    sides = [c == "on" for c in args.onset_two_sided or ["off"]]
+    if any(sides) and not all(onsets):
+        print("--onset-two-sided on: needs --onset-drift on (only)", file=sys.stderr)
+        return 2
+    table = None
+    if args.teacher_table:
+        try:
+            with open(args.teacher_table, encoding="utf-8") as f:
+                data = yaml.safe_load(f) or {}
+            table = ((data.get("pretrain") or {}).get("teacher_targets_kmh")) or None
+        except (OSError, yaml.YAMLError) as err:
+            print(f"--teacher-table {args.teacher_table}: {err}".splitlines()[0], file=sys.stderr)
+            return 2
+        if not isinstance(table, dict) or not all(
+            isinstance(v, int | float) and not isinstance(v, bool) for v in table.values()
+        ):
+            print(f"--teacher-table {args.teacher_table}: no pretrain.teacher_targets_kmh table "
+                  "of km/h by rail", file=sys.stderr)  # fmt: skip
+            return 2
     if any(drifts) and args.tier != "wheels+accel":
         print("--drift-correction on: needs --tier wheels+accel", file=sys.stderr)
         return 2
@@ -134,21 +171,24 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     loops = [
         {"release": g, "max_creep": c, "drift_correction": d, "onset_drift": o,
-         "gain_per_kmh": gain, "gain_scale_floor": floor, "scale_calibration": cal}
+         "gain_per_kmh": gain, "gain_scale_floor": floor, "scale_calibration": cal,
+         "onset_two_sided": side}
         for g in args.release or [DEFAULT_RELEASE]
         for c in caps
         for d in drifts
         for o in onsets
         for gain, floor in gains
         for cal in cals
+        for side in sides
     ]  # fmt: skip
     wsp = load_wsp_config(tier=args.tier) if args.thresholds == "tier" else WSPConfig()
     policies: list = [
         SlipTargetPolicy(t, SlipTargetLoop(wsp, **kw)) for kw in loops for t in targets
     ]
-    if args.rail_teacher:  # under each loop too (named where it is not the default)
+    if args.rail_teacher or table is not None:  # under each loop too (named where it is not
+        # the default)
         for kw in loops:
-            teacher = SlipTargetOracle()
+            teacher = SlipTargetOracle(None if table is None else SlipTargetTeacher(table))
             teacher.loop = SlipTargetLoop(wsp, **kw)
             teacher.name += loop_suffix(teacher.loop)
             policies.append(teacher)

@@ -82,14 +82,17 @@ def test_a_target_with_the_drift_correction_runs_the_corrected_loop():
     assert cal.name == "slip_target_2kmh_drift_onset_cal"
     alone_cal = fresh_stops.build_policy("target:2:cal", "wheels")
     assert alone_cal.loop.scale_calibration and not alone_cal.loop.drift_correction
-    assert not onset.loop.scale_calibration
+    assert not onset.loop.scale_calibration and not onset.loop.onset_two_sided
+    two = fresh_stops.build_policy("target:2:drift:onset2:cal", "wheels+accel")
+    assert two.loop.onset_two_sided and two.loop.onset_drift and two.loop.scale_calibration
+    assert two.name == "slip_target_2kmh_drift_onset2_cal"
     bad = (
-        ("target:2:onset", "target:X[:drift[:onset]][:GAINxFLOOR]"),
-        ("target:2:drift:0.8", "target:X[:drift[:onset]][:GAINxFLOOR]"),
+        ("target:2:onset", "target:X[:drift[:onset|:onset2]][:GAINxFLOOR]"),
+        ("target:2:drift:0.8", "target:X[:drift[:onset|:onset2]][:GAINxFLOOR]"),
         ("target:2:drift:ax0.25", "slip_target_gain_per_kmh: expected a number"),
         ("target:2:0.8x2", "slip_target_gain_scale_floor: must be in (0, 1]"),
-        ("target:2:drift:0.8x0.25:x", "target:X[:drift[:onset]][:GAINxFLOOR]"),
-        ("target:2:cal:drift", "target:X[:drift[:onset]][:GAINxFLOOR][:cal]"),
+        ("target:2:drift:0.8x0.25:x", "target:X[:drift[:onset|:onset2]][:GAINxFLOOR]"),
+        ("target:2:cal:drift", "target:X[:drift[:onset|:onset2]][:GAINxFLOOR][:cal]"),
     )
     for spec, words in bad:
         with pytest.raises(ValueError, match=re.escape(words)):
@@ -104,7 +107,10 @@ def test_a_target_with_the_drift_correction_runs_the_corrected_loop():
         (["--rail", "dry", "--policy", "target:40"], "a target in [0, 30] km/h"),
         (["--rail", "dry", "--draw", "0", "--policy", "classical"], "--draw: must be"),
         (["--rail", "dry", "--policy", "no_such_model.zip"], "no_such_model.zip"),
-        (["--rail", "dry", "--policy", "target:2:fast"], "target:X[:drift[:onset]][:GAINxFLOOR]"),
+        (
+            ["--rail", "dry", "--policy", "target:2:fast"],
+            "target:X[:drift[:onset|:onset2]][:GAINxFLOOR]",
+        ),
         (["--rail", "dry", "--tier", "wheels", "--policy", "target:2:drift"], "needs --tier"),
     ],
 )

@@ -89,6 +89,15 @@ def test_the_copy_names_the_settings_and_keeps_the_rest(tmp_path, capsys):
     cal = tmp_path / "cal" / "student.zip"
     assert set_loop_settings.main([str(old), str(cal), "--scale-calibration", "on"]) == 0
     assert model_metadata(cal)["env_kwargs"]["slip_target_scale_calibration"] is True
+    # the onset reading's other sense: only on a copy with the onset reading
+    two = tmp_path / "two" / "student.zip"
+    assert set_loop_settings.main([str(old), str(two), "--onset-two-sided", "on"]) == 2
+    assert "the two-sided onset reading needs the onset reading" in capsys.readouterr().err
+    assert not two.parent.exists()
+    assert set_loop_settings.main([str(onset), str(two), "--onset-two-sided", "on"]) == 0
+    kw = model_metadata(two)["env_kwargs"]
+    assert kw["slip_target_onset_two_sided"] is True and kw["slip_target_onset_drift"] is True
+    assert model_metadata(onset)["env_kwargs"]["slip_target_onset_two_sided"] is False
 
 
 def test_an_existing_copy_or_a_failed_write_leaves_nothing_new(tmp_path, capsys, monkeypatch):

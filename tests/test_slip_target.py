@@ -26,6 +26,7 @@ from wsp_env.baselines.slip_target import (
     CAL_MIN_SPEED_MPS,
     MAX_CREEP_FLOOR_KMH,
     ONSET_MIN_S,
+    REF_HELD_TOL_MPS,
     SlipTargetLoop,
     SlipTargetPolicy,
 )
@@ -594,9 +595,11 @@ def test_training_config_and_trained_model_carry_the_mode(tmp_path):
     assert policy.env_kwargs["slip_target_gain_scale_floor"] == 1.0
     assert policy.env_kwargs["slip_target_onset_drift"] is False
     assert policy.env_kwargs["memory_target_mean"] is True
+    assert policy.env_kwargs["slip_target_onset_two_sided"] is False
     meta = model_metadata(out / "best_model.zip")
     del meta["env_kwargs"]["slip_target_gain_scale_floor"]
     del meta["env_kwargs"]["slip_target_onset_drift"]
+    del meta["env_kwargs"]["slip_target_onset_two_sided"]
     del meta["env_kwargs"]["slip_target_drift_correction"]
     assert (
         model_metadata(out / "best_model.zip")["env_kwargs"]["slip_target_drift_correction"]
@@ -614,6 +617,7 @@ def test_training_config_and_trained_model_carry_the_mode(tmp_path):
     assert kw["slip_target_drift_correction"] is False  # a file from before the correction
     assert kw["slip_target_gain_scale_floor"] == 1.0  # from before the scaled gain: fixed
     assert kw["slip_target_onset_drift"] is False  # from before the onset reading
+    assert kw["slip_target_onset_two_sided"] is False  # from before its other sense
     del meta["env_kwargs"]["slip_target_release"]
     write_model_metadata(old, meta)
     kw = model_metadata(old)["env_kwargs"]
@@ -666,6 +670,7 @@ def test_training_config_and_trained_model_carry_the_mode(tmp_path):
     assert loop["drift_correction"] is False and loop["drift_min_span_s"] == 0.5
     assert loop["gain_scale_floor"] == 1.0
     assert loop["onset_drift"] is False and loop["onset_min_s"] == 0.2
+    assert loop["onset_two_sided"] is False and loop["ref_held_tol_kmh"] == pytest.approx(0.1)
     assert loop["onset_free_share"] == pytest.approx([0.174 / 3.8] * 4)
     assert (loop["accel_offset_gain"], loop["accel_learn_min_span_s"]) == (0.5, 2.0)
     assert (loop["working_band_kmh"], loop["working_band_rel"]) == pytest.approx((1.04, 0.0606))
@@ -883,15 +888,22 @@ def test_the_corrected_loop_keeps_its_reference_deceleration_through_consecutive
     assert np.allclose(held[False][32:], 0.5, atol=2e-3)
 
 
-def _onset_drift(reading_mps2: float, periods: int, anchor_read_first: bool = False) -> float:
+def _onset_drift(
+    reading_mps2: float, periods: int, anchor_read_first: bool = False, two_sided: bool = False,
+    keep: list | None = None,
+) -> float:  # fmt: skip
     """The drift the onset reading sets (m/s a second): a synthetic start, the train coasting
     at 0.3 m/s^2 with every wheel rolling with it and every cylinder at 0 for ``periods``
     control periods, the accelerometer reading ``reading_mps2``, then the cylinders over their
-    threshold. ``anchor_read_first``: an anchor's jump was read before the window closed."""
+    threshold. ``anchor_read_first``: an anchor's jump was read before the window closed;
+    ``two_sided``: the loop's ``onset_two_sided``; ``keep``: the core and loop appended."""
     core = make_core(1, accelerometer=True)
     loop = SlipTargetLoop(
-        load_wsp_config(tier="wheels+accel"), drift_correction=True, onset_drift=True
-    )
+        load_wsp_config(tier="wheels+accel"), drift_correction=True, onset_drift=True,
+        onset_two_sided=two_sided,
+    )  # fmt: skip
+    if keep is not None:
+        keep.extend((core, loop))
     loop.bind(core)
     loop.reset(np.array([0]))
     if anchor_read_first:
@@ -948,6 +960,50 @@ def test_the_onset_reading_takes_away_the_drift_of_an_accelerometer_reading_too_
     assert WSPBrakingEnv(action_mode="slip_target").core.loop.onset_drift is False
     name = SlipTargetPolicy(2.0, SlipTargetLoop(drift_correction=True, onset_drift=True)).name
     assert name == "slip_target_2kmh_drift_onset"
+
+
+def test_the_two_sided_onset_reading_raises_the_reference_only_while_no_wheel_holds_it():
+    """``onset_two_sided``: a reading 0.2 m/s^2 over the wheels' 0.3 m/s^2 (a downhill's
+    ``g sin(theta)``, a positive bias) sets a drift of -0.2 m/s a second (one-sided: none). The
+    tracked reference is the estimator's while a wheel holds that up (within 0.1 km/h of the
+    fastest reading); once every wheel reads below it, it rises over it at 0.2 m/s a second of
+    the time since (float32 speeds: 1e-4), and a wheel back at the reference, or an anchor,
+    restarts that time. Without the onset reading the setting is refused in one line."""
+    assert _onset_drift(0.5, 30) == 0.0
+    keep: list = []
+    assert _onset_drift(0.5, 30, two_sided=True, keep=keep) == pytest.approx(-0.2, abs=1e-3)
+    core, loop = keep
+    na, dt = core.n_axles, core.sim.control_period_s
+    assert REF_HELD_TOL_MPS == pytest.approx(0.1 / 3.6)
+    tracked = []
+
+    def period(wheels: np.ndarray, v_ref: float, age_s: float = 1.0) -> float:
+        obs = _drift_obs(core, wheels, v_ref, age_s, 0.5)  # valves working, no anchor
+        loop.advance(obs)
+        return float(loop.v_ref[0]) - float(obs[0, 4 * na + 1] * core.obs_par[K.OP_SPEED_SCALE])
+
+    v = 29.0
+    for _ in range(10):  # the reference held up by gripping wheels: the estimator's
+        tracked.append(period(np.full(na, v), v))
+    np.testing.assert_allclose(tracked, 0.0, atol=1e-4)
+    lifts = [period(np.full(na, v - 1.0), v - 0.5) for _ in range(25)]  # every wheel below
+    np.testing.assert_allclose(lifts, 0.2 * dt * np.arange(1, 26), atol=1e-4)
+    wheels = np.full(na, v - 1.0)
+    wheels[2] = v - 0.5 + 0.05 / 3.6  # one wheel back at the reference: held
+    assert period(wheels, v - 0.5) == pytest.approx(0.0, abs=1e-4)
+    assert period(np.full(na, v - 1.0), v - 0.5) == pytest.approx(0.2 * dt, abs=1e-4)
+    assert period(np.full(na, v - 1.0), v - 0.5) == pytest.approx(0.4 * dt, abs=1e-4)
+    with pytest.raises(ValueError, match=r"^slip_target_onset_two_sided: needs slip_target_onset"):
+        WSPBrakingEnv(
+            action_mode="slip_target", accelerometer=True, slip_target_drift_correction=True,
+            slip_target_onset_two_sided=True,
+        )  # fmt: skip
+    with pytest.raises(ValueError, match=r"^slip_target_onset_two_sided: must be true or false"):
+        SlipTargetLoop(drift_correction=True, onset_drift=True, onset_two_sided="yes")
+    name = SlipTargetPolicy(
+        2.0, SlipTargetLoop(drift_correction=True, onset_drift=True, onset_two_sided=True)
+    ).name
+    assert name == "slip_target_2kmh_drift_onset2"
 
 
 OPTS_UPHILL_LEAVES = {

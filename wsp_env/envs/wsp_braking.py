@@ -261,6 +261,7 @@ num_envs=N, **kwargs)``:
 | ``slip_target_gain_scale_floor`` | float | ``1.0`` | slip-target mode: the loop's gain is ``slip_target_gain_per_kmh`` times the pressure the axle holds over the demand, never below this share of it, (0, 1]; 1: a fixed gain (the loop before 2026-11-28; a policy file that does not name it loads with 1). With 0.25 and a gain of 0.8 per km/h low targets stop about 1 % shorter on leaves and oil, but the valves work harder on soap (73 % more air) and the score falls (docs/training.md, "The slip-target loop's gain scaled by the pressure held") |
 | ``slip_target_onset_drift`` | bool | ``False`` | slip-target mode, with ``slip_target_drift_correction`` (an error without it): the loop reads the accelerometer's offset while every cylinder is still under its brake's threshold at the stop's start (the wheels' mean deceleration against the mean reading) and takes the drift it carries the aided reference above the train away until the first anchor whose jump it reads (docs/training.md, "The onset reading of the accelerometer's offset"); a policy file that does not name it loads with ``False`` |
 | ``slip_target_scale_calibration`` | bool | ``False`` | slip-target mode, either tier: the loop reads each wheel-speed sensor's scale against the wheels' mean while every cylinder is still under its brake's threshold at the stop's start (every wheel rolls with the train) and divides it out of the wheels' readings and the estimator's reference (a BCU's wheel-diameter calibration; docs/training.md, "The wheel-scale calibration"); a policy file that does not name it loads with ``False`` |
+| ``slip_target_onset_two_sided`` | bool | ``False`` | slip-target mode, with ``slip_target_onset_drift`` (an error without it): the onset reading corrects its other sense too, a reading of too much deceleration (a downhill's ``g sin(theta)``, a positive bias), which carries the aided reference below the train; the tracked reference is raised by it only for the time no wheel has held the estimator's reference up (within 0.1 km/h of the fastest reading) since the last anchor (docs/training.md, "The onset reading's other sense"); a policy file that does not name it loads with ``False`` |
 | ``stagger_reset_steps`` | int | ``0`` | vector class only (the single class takes only 0), a training option: ``reset`` advances each environment a random, seeded number of steps below this into a stop, driven by the classical WSP, so that stops do not all end together (``WSPBrakingVectorEnv``'s docstring); 0: off |
 | ``memory_features`` | bool | False | append the memory features (Observation Space): per axle time in the current slide, time since the last release, sliding-energy estimate |
 | ``memory_target_mean`` | bool | False | slip-target mode (an error in the others): append each valve's mean slip-target action over the stop so far (Observation Space); a policy file that does not name it loads with ``False`` |
@@ -343,6 +344,9 @@ num_envs=N, **kwargs)``:
 * v3, 2026-12-06 (no new version; off by default): the slip-target loop may calibrate the
   wheel-speed sensors' scales at the stop's onset (``slip_target_scale_calibration``). A
   policy file that does not name it loads with ``False``.
+* v3, 2026-12-07 (no new version; off by default): the onset reading may correct both senses
+  of the accelerometer's offset (``slip_target_onset_two_sided``). A policy file that does not
+  name it loads with ``False``.
 * v3, 2026-12-07 (no new version; off by default, the observation unchanged without it): the
   stop's mean slip target may be observed (``memory_target_mean``, slip-target mode). A policy
   file that does not name it loads with ``False``.
@@ -367,6 +371,7 @@ from wsp_env.baselines.slip_target import (
     DEFAULT_GAIN_SCALE_FLOOR,
     DEFAULT_MAX_CREEP,
     DEFAULT_ONSET_DRIFT,
+    DEFAULT_ONSET_TWO_SIDED,
     DEFAULT_RELEASE,
     DEFAULT_SCALE_CALIBRATION,
 )
@@ -385,7 +390,8 @@ def make_core(n_envs: int, **kwargs: Any) -> BrakingCore:
     loop (``baselines.slip_target.SlipTargetLoop``, with ``slip_target_gain_per_kmh``,
     ``slip_target_lead_s``, ``slip_target_release``, ``slip_target_max_creep``,
     ``slip_target_drift_correction``, ``slip_target_gain_scale_floor``,
-    ``slip_target_onset_drift`` and ``slip_target_scale_calibration``, on the same tier's
+    ``slip_target_onset_drift``, ``slip_target_scale_calibration`` and
+    ``slip_target_onset_two_sided``, on the same tier's
     classical thresholds) tracks the targets."""
     from wsp_env.baselines.slip_target import (
         SlipTargetLoop,
@@ -394,6 +400,7 @@ def make_core(n_envs: int, **kwargs: Any) -> BrakingCore:
         check_loop_args,
         check_max_creep,
         check_onset_drift,
+        check_onset_two_sided,
         check_release,
         check_scale_calibration,
     )
@@ -415,6 +422,9 @@ def make_core(n_envs: int, **kwargs: Any) -> BrakingCore:
     calibrate = check_scale_calibration(
         kwargs.pop("slip_target_scale_calibration", DEFAULT_SCALE_CALIBRATION)
     )
+    two_sided = check_onset_two_sided(
+        kwargs.pop("slip_target_onset_two_sided", DEFAULT_ONSET_TWO_SIDED), onset
+    )
     mode = kwargs.get("action_mode")
     if mode in ("residual", "slip_target"):
         from wsp_env.baselines.classical import ClassicalWSP, accelerometer_tier, load_wsp_config
@@ -433,6 +443,7 @@ def make_core(n_envs: int, **kwargs: Any) -> BrakingCore:
                 gain_scale_floor=floor,
                 onset_drift=onset,
                 scale_calibration=calibrate,
+                onset_two_sided=two_sided,
             )
             kwargs.setdefault("slip_target_loop", loop)
     return BrakingCore(n_envs, **kwargs)
@@ -515,6 +526,7 @@ class WSPBrakingEnv(gym.Env):
         slip_target_gain_scale_floor: float = DEFAULT_GAIN_SCALE_FLOOR,
         slip_target_onset_drift: bool = DEFAULT_ONSET_DRIFT,
         slip_target_scale_calibration: bool = DEFAULT_SCALE_CALIBRATION,
+        slip_target_onset_two_sided: bool = DEFAULT_ONSET_TWO_SIDED,
         memory_features: bool = False,
         memory_target_mean: bool = False,
         stagger_reset_steps: int = 0,
@@ -546,6 +558,7 @@ class WSPBrakingEnv(gym.Env):
             slip_target_gain_scale_floor=slip_target_gain_scale_floor,
             slip_target_onset_drift=slip_target_onset_drift,
             slip_target_scale_calibration=slip_target_scale_calibration,
+            slip_target_onset_two_sided=slip_target_onset_two_sided,
             memory_features=memory_features, memory_target_mean=memory_target_mean,
         )  # fmt: skip
         self.action_space = self.core.action_space()
@@ -710,6 +723,7 @@ class WSPBrakingVectorEnv(VectorEnv):
         slip_target_gain_scale_floor: float = DEFAULT_GAIN_SCALE_FLOOR,
         slip_target_onset_drift: bool = DEFAULT_ONSET_DRIFT,
         slip_target_scale_calibration: bool = DEFAULT_SCALE_CALIBRATION,
+        slip_target_onset_two_sided: bool = DEFAULT_ONSET_TWO_SIDED,
         memory_features: bool = False,
         memory_target_mean: bool = False,
         stagger_reset_steps: int = 0,
@@ -743,6 +757,7 @@ class WSPBrakingVectorEnv(VectorEnv):
             slip_target_gain_scale_floor=slip_target_gain_scale_floor,
             slip_target_onset_drift=slip_target_onset_drift,
             slip_target_scale_calibration=slip_target_scale_calibration,
+            slip_target_onset_two_sided=slip_target_onset_two_sided,
             memory_features=memory_features, memory_target_mean=memory_target_mean,
         )  # fmt: skip
         self.num_envs = num_envs

@@ -34,7 +34,8 @@ ENV_KWARGS = (
     "slip_target_min_kmh", "slip_target_max_kmh", "slip_target_gain_per_kmh",
     "slip_target_lead_s", "slip_target_release", "slip_target_max_creep",
     "slip_target_drift_correction", "slip_target_gain_scale_floor", "slip_target_onset_drift",
-    "slip_target_scale_calibration", "memory_features", "memory_target_mean",
+    "slip_target_scale_calibration", "slip_target_onset_two_sided", "memory_features",
+    "memory_target_mean",
     "stagger_reset_steps",
 )  # fmt: skip
 SCHEDULE = re.compile(r"^lin_([0-9.eE+-]+)$")

@@ -137,6 +137,7 @@ def input_spec(policy: SB3Policy) -> dict[str, Any]:
         DRIFT_MIN_SPAN_S,
         MAX_CREEP_FLOOR_KMH,
         ONSET_MIN_S,
+        REF_HELD_TOL_MPS,
     )
     from wsp_env.core import braking as B
     from wsp_env.core import kernel as K
@@ -219,6 +220,11 @@ def input_spec(policy: SB3Policy) -> dict[str, Any]:
             # threshold, free_share of the full pressure, for at least onset_min_s)
             "onset_drift": loop.onset_drift,
             "onset_min_s": ONSET_MIN_S,
+            # both senses of the offset; the upward correction times only the time no wheel
+            # has held the estimator's reference up (within ref_held_tol_kmh of the fastest
+            # reading) since the last anchor
+            "onset_two_sided": loop.onset_two_sided,
+            "ref_held_tol_kmh": REF_HELD_TOL_MPS * 3.6,
             "onset_free_share": [float(x) for x in loop.free_share],
             # each wheel's reading (and its deceleration) times the wheels' mean reading over
             # its own in the same window (for at least onset_min_s, every wheel's mean above
