@@ -104,6 +104,11 @@ what the sensor model measures) — exactly as the classical WSP (``classical.py
   anchor: while every cylinder is under its brake's threshold every wheel rolls with the
   train, so the accelerometer's mean reading less the wheels' mean deceleration is its offset
   (``_read_onset``; ``docs/training.md``, "The onset reading of the accelerometer's offset").
+  With ``onset_two_sided`` it reads a reading of too much deceleration too (a downhill's
+  ``g sin(theta)``, a positive bias: the aided reference sinks below the train, which matters
+  when every wheel slides below it), and every drift downward, the onset's or an anchor's,
+  raises the tracked reference only for the time no wheel has held the estimator's up
+  (``docs/training.md``, "The onset reading's other sense").
 * **the wheel-speed sensors' scales, calibrated** (``scale_calibration``; either tier; off by
   default): in that same window each sensor's mean reading against the wheels' mean is its
   scale error (a wheel diameter known to the BCU only roughly), divided out of every reading
@@ -461,7 +466,11 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         least ``ACC_LEARN_MIN_SPAN_S``; the rest a second is the drift taken away until the
         next anchor (read only over ``DRIFT_MIN_SPAN_S`` or more). A drift downward is bounded
         by the fastest wheel, which holds the estimator's reference up; only what the jump
-        shows is corrected."""
+        shows is corrected. With ``onset_two_sided`` a drift upward (the reference sinking
+        below the train, read at the onset or from an anchor's jump) raises the tracked
+        reference by the drift times ``unheld_s``, the time since a wheel last held the
+        estimator's reference up (within ``REF_HELD_TOL_MPS`` of the fastest reading) or it
+        anchored, instead of the time since the anchor."""
         dt = self.dt
         na = self.n_axles
         out_of_apply = (obs[:, self.valve_cols] < 1.0 - 1e-6).any(axis=1)
@@ -513,8 +522,9 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         every wheel slides below it; ``onset_two_sided`` reads that sense too (``wheels -
         reading`` within ``+-ACC_CORR_MAX``), made up only while no wheel holds the reference
         up (``_correct_drift``). Returns
-        where the drift was set (the tracked reference steps down there: no fall of the
-        train), or None once every environment's window has closed (nothing left to read)."""
+        where the drift was set (the tracked reference steps there, down, or with
+        ``onset_two_sided`` up: no fall of the train either way), or None once every
+        environment's window has closed (nothing left to read)."""
         if not self.onset_open.any():
             return None
         na = self.n_axles

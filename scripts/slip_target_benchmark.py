@@ -15,7 +15,7 @@ until then: the wheels tier's 2.0 m/s^2 recovery hold and 3 s release interval w
         [--target 2 --target 6] [--runs 300] [--stops development] [--vehicle regiolis] \\
         [--json runs/bench/slip_constant.json] [--rail-teacher] [--release always] \\
         [--max-creep 0 --max-creep 0.2] [--drift-correction on [--onset-drift on]] \\
-        [--pressure-gain 0.8x0.25] [--scale-calibration on] [--onset-two-sided on] \
+        [--pressure-gain 0.8x0.25] [--scale-calibration on] [--onset-two-sided on] \\
         [--teacher-table configs/train/ppo_bc_slip_target_cal_accel_uic_z1.yaml]
 
 ``--rail-teacher`` adds ``baselines.oracle.SlipTargetOracle``: the privileged teacher of the

@@ -40,12 +40,13 @@ def test_off_by_default_and_nothing_else_changes():
     assert info_a["metrics"] == info_b["metrics"]
 
 
-@pytest.mark.parametrize("repeat", [1, 3])
-def test_the_running_mean_of_the_clipped_actions_per_control_period(repeat):
+@pytest.mark.parametrize(("repeat", "memory"), [(1, False), (3, True)])
+def test_the_running_mean_of_the_clipped_actions_per_control_period(repeat, memory):
     """Step by step the observed entries are the mean of every action so far, clipped to
     [-1, 1], each counted ``action_repeat`` times (once per control period): a hand-kept sum
-    agrees to float32."""
-    env = WSPBrakingEnv(**ST, memory_target_mean=True, action_repeat=repeat)
+    agrees to float32; with the memory features they sit after those, which stay the memory
+    features (``memory_obs``)."""
+    env = WSPBrakingEnv(**ST, memory_target_mean=True, action_repeat=repeat, memory_features=memory)
     obs, _ = env.reset(seed=2, options={**SOAP, "speed_kmh": 60.0})
     width = env.observation_space.shape[0]
     sl = slice(width - 2 * N, width - N)
@@ -60,6 +61,11 @@ def test_the_running_mean_of_the_clipped_actions_per_control_period(repeat):
         periods += repeat
         np.testing.assert_allclose(obs[sl], total / periods, rtol=0, atol=1e-6)
         np.testing.assert_allclose(obs[-N:], np.clip(action, -1.0, 1.0), atol=0)
+        if memory:
+            width_k = env.core.kernel_obs_dim
+            np.testing.assert_array_equal(
+                obs[width_k : width_k + 3 * N], env.core.memory_obs()[0].astype(np.float32)
+            )
         assert not (term or trunc)
     assert env.core.memory_target_periods[0] == 120 * repeat
 
@@ -84,7 +90,8 @@ def test_starts_anew_at_each_vector_autoreset_and_is_each_envs_own():
         if term[0] or trunc[0]:
             assert t > 100
             final = info["final_obs"][0][sl]
-            assert -0.5 < final.min() and final.max() < 0.5  # the ended stop's mixed mean
+            want = (-0.5 * 100 + 0.5 * (t + 1 - 100)) / (t + 1)  # the ended stop's mean
+            np.testing.assert_allclose(final, want, atol=1e-6)
             np.testing.assert_array_equal(obs[0, sl], 1.0)  # the new stop's: no period yet
             obs = venv.step(action)[0]
             np.testing.assert_array_equal(obs[0, sl], 0.5)  # its own actions only

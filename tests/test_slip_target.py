@@ -967,9 +967,11 @@ def test_the_two_sided_onset_reading_raises_the_reference_only_while_no_wheel_ho
     ``g sin(theta)``, a positive bias) sets a drift of -0.2 m/s a second (one-sided: none). The
     tracked reference is the estimator's while a wheel holds that up (within 0.1 km/h of the
     fastest reading); once every wheel reads below it, it rises over it at 0.2 m/s a second of
-    the time since (float32 speeds: 1e-4), and a wheel back at the reference, or an anchor,
-    restarts that time. Without the onset reading the setting is refused in one line."""
+    the time since (float32 speeds: 1e-4), and a wheel back at the reference restarts that
+    time (as an anchor does). A reading of too little deceleration sets what it did. Without
+    the onset reading the setting is refused in one line."""
     assert _onset_drift(0.5, 30) == 0.0
+    assert _onset_drift(0.1, 30, two_sided=True) == pytest.approx(0.2, abs=1e-3)  # as before
     keep: list = []
     assert _onset_drift(0.5, 30, two_sided=True, keep=keep) == pytest.approx(-0.2, abs=1e-3)
     core, loop = keep
