@@ -466,7 +466,7 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         least ``ACC_LEARN_MIN_SPAN_S``; the rest a second is the drift taken away until the
         next anchor (read only over ``DRIFT_MIN_SPAN_S`` or more). A drift downward is bounded
         by the fastest wheel, which holds the estimator's reference up; only what the jump
-        shows is corrected. With ``onset_two_sided`` a drift upward (the reference sinking
+        shows is corrected. With ``onset_two_sided`` a drift downward (the reference sinking
         below the train, read at the onset or from an anchor's jump) raises the tracked
         reference by the drift times ``unheld_s``, the time since a wheel last held the
         estimator's reference up (within ``REF_HELD_TOL_MPS`` of the fastest reading) or it
