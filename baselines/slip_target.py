@@ -509,6 +509,13 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
             corrected = np.where(self.drift < 0.0, v_ref - self.drift * self.unheld_s, corrected)
         return np.maximum(corrected, np.minimum(fastest, v_ref))
 
+    def _free(self, obs: np.ndarray) -> np.ndarray:
+        """Per environment, whether every cylinder is under its brake's threshold (its share of
+        the full pressure under ``free_share``): every wheel rolls with the train, the window
+        the onset reading and the wheel-scale calibration read."""
+        na = self.n_axles
+        return (obs[:, 3 * na : 4 * na] < self.free_share[None, :]).all(axis=1)
+
     def _read_onset(self, obs: np.ndarray, v: np.ndarray) -> np.ndarray | None:
         """The onset reading (``onset_drift``; module docstring): while every cylinder is under
         its brake's threshold since the stop began, every wheel rolls with the train, so the
@@ -527,9 +534,7 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         environment's window has closed (nothing left to read)."""
         if not self.onset_open.any():
             return None
-        na = self.n_axles
-        share = obs[:, 3 * na : 4 * na].astype(np.float64)  # the full pressure's share
-        free = (share < self.free_share[None, :]).all(axis=1)
+        free = self._free(obs)
         acc = obs[:, self.acc_index].astype(np.float64) * self.a_scale
         mean_v = v.mean(axis=1)
         still = self.onset_open & free
@@ -567,8 +572,7 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         na = self.n_axles
         v = obs[:, :na].astype(np.float64)
         if self.cal_open.any():
-            share = obs[:, 3 * na : 4 * na].astype(np.float64)
-            free = (share < self.free_share[None, :]).all(axis=1)
+            free = self._free(obs)
             still = self.cal_open & free
             self.cal_sum[still] += v[still] * self.v_scale
             self.cal_n[still] += 1.0

@@ -24,7 +24,6 @@ import sys
 from typing import Any
 
 import numpy as np
-import yaml
 from fresh_stops import FRESH_SEED_BASE, MAX_DRAW, benchmark_setup, build_policy
 
 from wsp_env.envs.tiers import TIERS, VERSION
@@ -32,6 +31,7 @@ from wsp_env.evaluation.benchmark import DAMAGE_CRITERIA, POLICY_KEYS
 from wsp_env.evaluation.runner import run_runs
 from wsp_env.evaluation.suites import Run
 from wsp_env.physics import layout as L
+from wsp_env.training.config import config_teacher_table
 
 
 class TargetRecorder:
@@ -117,11 +117,10 @@ def main(argv: list[str] | None = None) -> int:
             ) from None
         teacher: dict[str, float] = {}
         if args.teacher:
-            with open(args.teacher, encoding="utf-8") as f:
-                cfg = yaml.safe_load(f) or {}
-            teacher = (cfg.get("pretrain") or {}).get("teacher_targets_kmh") or {}
-            if not teacher:
-                raise ValueError(f"--teacher {args.teacher}: no pretrain.teacher_targets_kmh")
+            try:
+                teacher = config_teacher_table(args.teacher)
+            except ValueError as err:
+                raise ValueError(f"--teacher {err}") from None
         veh, max_time_s, kw = benchmark_setup(args.vehicle, args.tier)
         policy = TargetRecorder(build_policy(args.policy, args.tier), edges)
         seeds = [FRESH_SEED_BASE + i for i in range(args.draw)]

@@ -32,8 +32,6 @@ import json
 import sys
 from pathlib import Path
 
-import yaml
-
 from wsp_env import BENCHMARK_VEHICLES
 from wsp_env.baselines.classical import WSPConfig, load_wsp_config
 from wsp_env.baselines.oracle import SlipTargetOracle, SlipTargetTeacher
@@ -48,6 +46,7 @@ from wsp_env.baselines.slip_target import (
 )
 from wsp_env.cli.printing import print_benchmark
 from wsp_env.evaluation.benchmark import SEALED_RUNS, STOP_SETS, run_benchmark
+from wsp_env.training.config import config_teacher_table
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -147,17 +146,9 @@ def main(argv: list[str] | None = None) -> int:
     table = None
     if args.teacher_table:
         try:
-            with open(args.teacher_table, encoding="utf-8") as f:
-                data = yaml.safe_load(f) or {}
-            table = ((data.get("pretrain") or {}).get("teacher_targets_kmh")) or None
-        except (OSError, yaml.YAMLError) as err:
-            print(f"--teacher-table {args.teacher_table}: {err}".splitlines()[0], file=sys.stderr)
-            return 2
-        if not isinstance(table, dict) or not all(
-            isinstance(v, int | float) and not isinstance(v, bool) for v in table.values()
-        ):
-            print(f"--teacher-table {args.teacher_table}: no pretrain.teacher_targets_kmh table "
-                  "of km/h by rail", file=sys.stderr)  # fmt: skip
+            table = config_teacher_table(args.teacher_table)
+        except ValueError as err:
+            print(f"--teacher-table {err}", file=sys.stderr)
             return 2
     if any(drifts) and args.tier != "wheels+accel":
         print("--drift-correction on: needs --tier wheels+accel", file=sys.stderr)

@@ -176,3 +176,13 @@ def test_policy_targets_bins_every_decision_by_the_train_speed(capsys):
     assert pt.main(["--policy", "target:3", "--bands", "a,b"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "--bands: expected km/h edges" in err
+    # the teacher's table: a config's, checked as training checks it (one implementation,
+    # ``config_teacher_table``, which slip_target_benchmark.py --teacher-table uses too)
+    from wsp_env.training.config import config_teacher_table
+
+    root = Path(__file__).resolve().parents[1] / "configs" / "train"
+    table = config_teacher_table(root / "ppo_bc_slip_target_cal_accel_uic_z1.yaml")
+    assert table["leaves"] == 2.0 and table["soap"] == 4.25
+    assert pt.main(["--policy", "target:3", "--teacher", str(root / "ppo_uic_z1.yaml")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "no pretrain.teacher_targets_kmh" in err

@@ -182,6 +182,17 @@ def load_train_config(path: str | Path) -> TrainConfig:
         raise ConfigError(f"{p}: {err}") from None
 
 
+def config_teacher_table(path: str | Path) -> dict[str, float]:
+    """The rail table (``pretrain.teacher_targets_kmh``, km/h by rail) of the training config
+    at ``path``, checked as ``load_train_config`` checks it; a one-line ``ConfigError`` naming
+    the file where the config is bad or names no table."""
+    cfg = load_train_config(path)
+    table = cfg.pretrain.teacher_targets_kmh if cfg.pretrain is not None else None
+    if not table:
+        raise ConfigError(f"{path}: no pretrain.teacher_targets_kmh (the rail teacher's table)")
+    return dict(table)
+
+
 def parse_train_config(data: Any, source: str = "") -> TrainConfig:
     from wsp_env.core.config import from_dict
 
