@@ -780,7 +780,9 @@ def env_step_serial(*args):
 @njit(parallel=True, **KERNEL_FLAGS)
 def env_step_parallel(*args):
     for e in prange(args[ARG_ENV_PAR].shape[0]):
-        env_step_one(e, *args)
+        # prange's index is unsigned: as int64 the callees' compiled code is the serial
+        # path's, not a second specialisation of the whole call tree
+        env_step_one(np.int64(e), *args)
 
 
 def step_args(

@@ -440,7 +440,9 @@ def _step_serial(*args):
 @njit(parallel=True, **KERNEL_FLAGS)
 def _step_parallel(*args):
     for e in prange(args[ARG_ENV_PAR].shape[0]):
-        step_env(e, *args)
+        # prange's index is unsigned: as int64 the callees' compiled code is the serial
+        # path's, not a second specialisation of the whole call tree
+        step_env(np.int64(e), *args)
 
 
 PARALLEL_MIN_ENVS = 64  # below this, thread start-up costs more than it saves

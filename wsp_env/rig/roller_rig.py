@@ -311,8 +311,9 @@ def hil_period(
         acc[0, 6] = max(acc[0, 6], abs(body[0]))
         for k in range(na):
             axle_state[0, k, L.AS_EXT_TORQUE] = est[k, E_CHAT]
-        step_env(0, 1, ctrl, dummy_cmd, env_par, axle_par, sections, env_state, axle_state,
-                  field, env_acc, axle_acc)  # fmt: skip
+        # int64, not literal, arguments: the simulator's compiled step_env, not a specialisation
+        step_env(np.int64(0), np.int64(1), ctrl, dummy_cmd, env_par, axle_par, sections,
+                 env_state, axle_state, field, env_acc, axle_acc)  # fmt: skip
     return n_ctrl, n_rec
 
 
