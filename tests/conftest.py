@@ -57,6 +57,14 @@ def single(vehicle, rail: str | object, speed_kmh: float = 120.0, dt_s: float = 
     return sim
 
 
+def cached_signatures(fn) -> list:
+    """The signatures numba's on-disk cache holds for the compiled function ``fn`` (every
+    process's compiles since the kernels' sources last changed; ``fn.signatures`` lists only
+    what this process compiled or loaded itself, and nothing for a callee compiled into its
+    caller). Numba's own index, read through its cache object."""
+    return [key[0] for key in fn._cache._cache_file._load_index()]
+
+
 @pytest.fixture
 def rng() -> np.random.Generator:
     return np.random.default_rng(1234)

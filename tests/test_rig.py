@@ -6,8 +6,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import cached_signatures
 
 from wsp_env.cli import main
+from wsp_env.physics.integrator import step_env
 from wsp_env.policy import NoWSP, make_policy
 from wsp_env.rig.roller_rig import RigConfig, RollerRig, rig_test
 
@@ -45,6 +47,9 @@ def test_rig_and_track_agree_for_a_constant_pressure_stop(rail):
     s = result.summary
     assert s["stopped"] and abs(s["rig_vs_track_pct"]) < 1.0
     assert max(s["e_omega_rms_kmh"]) < 0.05
+    # the rig and the track step the vehicle through one compiled step_env (a literal
+    # argument would compile a specialisation of its whole call tree)
+    assert len(cached_signatures(step_env)) == 1, cached_signatures(step_env)
 
 
 def test_smc_keeps_the_speed_error_bounded_through_a_recovery_step():
