@@ -994,7 +994,7 @@ def build_parser() -> argparse.ArgumentParser:
 COMPILING = ("simulate", "evaluate", "benchmark", "train", "validate", "rig", "traction",
              "bench", "sweep", "finetune")  # fmt: skip
 COMPILE_NOTICE = (
-    "wsp-env: compiling the physics kernels (once per install and version; 10-20 s on 2 cores) ..."
+    "wsp-env: compiling the physics kernels (once per install and version; 15-30 s on 2 cores) ..."
 )
 
 
