@@ -282,9 +282,12 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
     classical WSP only while it is active;
     ``"always"``, whenever the reference's age allows (the loop before 2026-11-27);
     ``max_creep``: each target at most this fraction of the reference speed (0: no cap, the loop
-    before the cap); ``drift_correction``: track the slip against the estimator's reference less
-    the drift its last anchor showed and it has not learned (module docstring; needs the
-    accelerometer: ``bind`` refuses a core without one); ``gain_scale_floor``: the gain times
+    before the cap), or ``creep_floor_kmh`` where that is more (``MAX_CREEP_FLOOR_KMH``, 2 km/h,
+    by default; a lower floor makes the cap a creep schedule for low targets as well: a probe's
+    setting, not an environment argument); ``drift_correction``: track the slip against the
+    estimator's reference less the drift its last anchor showed and it has not learned (module
+    docstring; needs the accelerometer: ``bind`` refuses a core without one);
+    ``gain_scale_floor``: the gain times
     the pressure held over the demand, never below this (1: a fixed gain; module
     docstring); ``onset_drift``: with the drift correction, its drift read at the stop's start
     as well (``_read_onset``); ``onset_two_sided``: with the onset reading, its other sense too
@@ -309,6 +312,7 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         onset_drift: bool = DEFAULT_ONSET_DRIFT,
         scale_calibration: bool = DEFAULT_SCALE_CALIBRATION,
         onset_two_sided: bool = DEFAULT_ONSET_TWO_SIDED,
+        creep_floor_kmh: float = MAX_CREEP_FLOOR_KMH,
     ) -> None:
         self.wsp_given = wsp  # None: the bound core's tier's thresholds (``bind``)
         self.cfg = wsp or WSPConfig()
@@ -320,6 +324,7 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         self.onset_drift = check_onset_drift(onset_drift, self.drift_correction)
         self.scale_calibration = check_scale_calibration(scale_calibration)
         self.onset_two_sided = check_onset_two_sided(onset_two_sided, self.onset_drift)
+        self.creep_floor_kmh = check_number(creep_floor_kmh, "creep_floor_kmh", ge=0.0, le=30.0)
 
     def bind(self, core: Any) -> None:
         """Attach to a ``BrakingCore``: its scales, valve map and batch size."""
@@ -674,7 +679,7 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         hold = np.where(demand > 1e-6, pressure / np.maximum(demand, 1e-6), 1.0)
         target = np.asarray(target_kmh, dtype=np.float64)[:, self.valve_of_axle]
         if self.max_creep > 0.0:  # at most max_creep of the reference speed, or the floor
-            cap = np.maximum((3.6 * self.max_creep) * v_ref, MAX_CREEP_FLOOR_KMH)
+            cap = np.maximum((3.6 * self.max_creep) * v_ref, self.creep_floor_kmh)
             target = np.minimum(target, cap)
         gain: float | np.ndarray = self.gain_per_kmh
         if self.gain_scale_floor < 1.0:  # scaled by the pressure held (module docstring)
@@ -697,13 +702,16 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
 
 def loop_suffix(loop: SlipTargetLoop) -> str:
     """What a policy's name adds for a loop whose settings are not the defaults:
-    ``_<release>`` for the gate, ``_creep<x>`` for the cap, ``_drift`` for the drift correction,
+    ``_<release>`` for the gate, ``_creep<x>`` for the cap (``_creep<x>at<floor>`` with another
+    floor), ``_drift`` for the drift correction,
     ``_onset`` for its onset reading (``_onset2`` two-sided), ``_pgain<gain>x<floor>`` for a
     gain scaled by the pressure held, ``_gain<gain>`` for another fixed gain, ``_cal`` for the
     wheel-scale calibration
     (``""`` for the default loop), so that two loops never share a name."""
     gate = "" if loop.release == DEFAULT_RELEASE else f"_{loop.release}"
     cap = "" if loop.max_creep == DEFAULT_MAX_CREEP else f"_creep{loop.max_creep:g}"
+    if loop.creep_floor_kmh != MAX_CREEP_FLOOR_KMH:
+        cap = f"_creep{loop.max_creep:g}at{loop.creep_floor_kmh:g}"
     scaled = ""
     if loop.gain_scale_floor != DEFAULT_GAIN_SCALE_FLOOR:
         scaled = f"_pgain{loop.gain_per_kmh:g}x{loop.gain_scale_floor:g}"

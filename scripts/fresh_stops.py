@@ -14,11 +14,16 @@ tier, the environment's default loop), ``target:X:drift`` (the same with the loo
 correction, ``wheels+accel`` only; ``target:X:drift:onset`` with its onset reading of the
 accelerometer's offset, ``target:X:drift:onset2`` with that reading two-sided),
 ``target:X[:drift]:GxF`` (with the loop's gain G per km/h
-scaled by the pressure held, never below F of it: ``target:2:drift:0.8x0.25``), each with
+scaled by the pressure held, never below F of it: ``target:2:drift:0.8x0.25``), then
+``:creepC`` or ``:creepC@F`` for the loop's creep cap C (a fraction of the reference speed)
+with its floor F km/h (2 by default; ``target:2:creep0.02@0.5`` asks for 2 km/h above 100 km/h,
+2 % of the reference speed below, never under 0.5 km/h: a creep schedule), each with
 ``:cal`` last for the loop's wheel-scale calibration (either tier: ``target:2:cal``,
 ``target:2:drift:onset:cal``), or anything
 ``wsp-env benchmark --policy`` takes (a model file, a shipped policy's name). ``--json`` keeps
-every run (written whole or not at all).
+every run (written whole or not at all). ``--watchdog-floor A`` runs every policy under a
+minimum-deceleration supervision floor of A m/s^2 instead of the benchmark's (a probe of the
+supervision, not the benchmark: the header says so).
 
     .venv/bin/python scripts/fresh_stops.py --rail leaves --draw 1200 \\
         --policy runs/train/bc_st_cap2_s1/student.zip --policy target:2 --policy classical \\
@@ -36,8 +41,14 @@ from typing import Any
 
 import numpy as np
 
-from wsp_env.baselines.slip_target import SlipTargetLoop, SlipTargetPolicy, parse_pressure_gain
-from wsp_env.core.config import load_vehicle
+from wsp_env.baselines.slip_target import (
+    DEFAULT_MAX_CREEP,
+    MAX_CREEP_FLOOR_KMH,
+    SlipTargetLoop,
+    SlipTargetPolicy,
+    parse_pressure_gain,
+)
+from wsp_env.core.config import check_number, load_vehicle
 from wsp_env.envs import make_core
 from wsp_env.envs.tiers import TIERS, VERSION, benchmark_env_kwargs
 from wsp_env.evaluation.benchmark import DAMAGE_CRITERIA, POLICY_KEYS
@@ -69,6 +80,21 @@ def rail_seeds(vehicle: str, tier: str, rail: str, draw: int) -> list[int]:
     return found
 
 
+def parse_creep(text: str, where: str) -> tuple[float, float]:
+    """``creepC`` or ``creepC@F`` as the loop's ``(max_creep, creep_floor_kmh)`` (the floor 2
+    km/h without ``@F``), checked as the loop checks them; else a one-line ``ValueError``
+    beginning with ``where``."""
+    cap, _, floor = text.removeprefix("creep").partition("@")
+    try:
+        creep = float(cap)
+        creep_floor = float(floor) if floor else MAX_CREEP_FLOOR_KMH
+        SlipTargetLoop(max_creep=creep, creep_floor_kmh=creep_floor)  # the loop's own checks
+    except ValueError as err:
+        msg = f"{where}: creepC[@F] with C in [0, 1] and F in [0, 30] km/h ({err})"
+        raise ValueError(msg) from None
+    return creep, creep_floor
+
+
 def build_policy(spec: str, tier: str) -> Any:
     """``target:X`` as a constant target on the tier's default loop, ``target:X:drift`` with
     the loop's drift correction, ``target:X[:drift]:GxF`` with its gain G per km/h scaled by
@@ -80,6 +106,9 @@ def build_policy(spec: str, tier: str) -> Any:
         items = option.split(":") if option else []
         cal = items[-1:] == ["cal"]
         items = items[:-1] if cal else items
+        creep, creep_floor = DEFAULT_MAX_CREEP, MAX_CREEP_FLOOR_KMH
+        if items and items[-1].startswith("creep"):
+            creep, creep_floor = parse_creep(items.pop(), f"--policy {spec}")
         drift = items[:1] == ["drift"]
         rest = items[1:] if drift else items
         onset = drift and rest[:1] in (["onset"], ["onset2"])
@@ -87,7 +116,7 @@ def build_policy(spec: str, tier: str) -> Any:
         rest = rest[1:] if onset else rest
         if len(rest) > 1 or (rest and "x" not in rest[0]):
             raise ValueError(
-                f"--policy {spec}: target:X[:drift[:onset|:onset2]][:GAINxFLOOR][:cal]"
+                f"--policy {spec}: target:X[:drift[:onset|:onset2]][:GAINxFLOOR][:creepC[@F]][:cal]"
             )
         gain, floor = parse_pressure_gain(rest[0] if rest else "off", f"--policy {spec}")
         if drift and tier != "wheels+accel":
@@ -101,14 +130,20 @@ def build_policy(spec: str, tier: str) -> Any:
         # the bound core's tier's loop
         loop = SlipTargetLoop(drift_correction=drift, gain_per_kmh=gain, gain_scale_floor=floor,
                               onset_drift=onset, scale_calibration=cal,
-                              onset_two_sided=two_sided)  # fmt: skip
+                              onset_two_sided=two_sided, max_creep=creep,
+                              creep_floor_kmh=creep_floor)  # fmt: skip
         return SlipTargetPolicy(kmh, loop)
     return make_policy(spec, tier=tier)
 
 
-def run(vehicle: str, tier: str, seeds: list[int], specs: list[str]) -> dict[str, list[dict]]:
+def run(
+    vehicle: str, tier: str, seeds: list[int], specs: list[str],
+    watchdog_floor: float | None = None,
+) -> dict[str, list[dict]]:  # fmt: skip
     """Every policy on the stops of ``seeds``: each policy's run results, keyed by its spec."""
     veh, max_time_s, kw = benchmark_setup(vehicle, tier)
+    if watchdog_floor is not None:  # a probe of the supervision, not the benchmark's
+        kw = {**kw, "watchdog": {"min_decel_mps2": watchdog_floor}}
     runs = [Run(f"fresh_{s}", s, {}, dict(DAMAGE_CRITERIA), veh) for s in seeds]
     out = {}
     for spec in specs:
@@ -157,6 +192,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--vehicle", default="uic_z1")
     ap.add_argument("--tier", default="wheels+accel", choices=list(TIERS))
     ap.add_argument("--json", dest="json_path", help="write every run here")
+    ap.add_argument(
+        "--watchdog-floor",
+        type=float,
+        default=None,
+        help="the supervision's floor, m/s^2 (a probe; default: the benchmark's)",
+    )
     args = ap.parse_args(argv)
     try:
         if not 1 <= args.draw <= MAX_DRAW:
@@ -166,10 +207,12 @@ def main(argv: list[str] | None = None) -> int:
             raise ValueError(f"--rail: {args.rail!r} is not one of {', '.join(rails)}")
         for spec in args.policy:  # every policy checked before any stop runs
             build_policy(spec, args.tier)
+        if args.watchdog_floor is not None:  # the watchdog's own check, before any stop
+            check_number(args.watchdog_floor, "--watchdog-floor", ge=0.0, le=5.0)
         seeds = rail_seeds(args.vehicle, args.tier, args.rail, args.draw)
         if not seeds:
             raise ValueError(f"--draw: no {args.rail} stop among {args.draw} seeds")
-        results = run(args.vehicle, args.tier, seeds, args.policy)
+        results = run(args.vehicle, args.tier, seeds, args.policy, args.watchdog_floor)
     except (OSError, ValueError, KeyError) as err:
         msg = str(err) if isinstance(err, ValueError) else f"{type(err).__name__}: {err}"
         print(f"fresh_stops: {msg}", file=sys.stderr)
@@ -177,6 +220,8 @@ def main(argv: list[str] | None = None) -> int:
     last = FRESH_SEED_BASE + args.draw - 1
     print(f"{len(seeds)} {args.rail} stops among seeds {FRESH_SEED_BASE}-{last} "
           f"({args.vehicle}, {args.tier}, {VERSION})")  # fmt: skip
+    if args.watchdog_floor is not None:
+        print(f"supervision floor {args.watchdog_floor:g} m/s^2: a probe, not the benchmark's")
     classical = results.get("classical")
     sums = {spec: summary(res, classical) for spec, res in results.items()}
     for spec, s in sums.items():
@@ -196,6 +241,7 @@ def main(argv: list[str] | None = None) -> int:
         payload = {
             "vehicle": args.vehicle, "tier": args.tier, "version": VERSION, "rail": args.rail,
             "seeds": seeds, "summary": sums, "run_results": results,
+            "watchdog_floor_mps2": args.watchdog_floor,
         }  # fmt: skip
         tmp.write_text(json.dumps(payload, indent=1, default=float), encoding="utf-8")
         os.replace(tmp, path)

@@ -62,6 +62,24 @@ def test_stops_of_one_rail_run_under_every_policy(tmp_path, capsys):
     assert s["stop_ratio_worst_stop"] == data["run_results"]["target:3"][worst]["scenario"]
 
 
+def test_a_supervision_floor_probe_runs_every_policy_under_it(tmp_path, capsys):
+    """``--watchdog-floor``: the stops run under that minimum-deceleration floor. Dry stops
+    brake at about 1 m/s^2 on gripping wheels, so a 5 m/s^2 floor trips the supervision on
+    every one, which the benchmark's 0.2 m/s^2 never does there; the header and the file say
+    it was a probe."""
+    out = tmp_path / "f.json"
+    argv = ["--rail", "dry", "--draw", "12", "--policy", "target:3", "--watchdog-floor", "5",
+            "--json", str(out)]  # fmt: skip
+    assert fresh_stops.main(argv) == 0
+    data = json.loads(out.read_text())
+    assert data["watchdog_floor_mps2"] == 5.0
+    runs = data["run_results"]["target:3"]
+    assert runs and all(r["watchdog"]["min_deceleration"] == 1 for r in runs)
+    assert "supervision floor 5 m/s^2: a probe" in capsys.readouterr().out
+    plain = fresh_stops.run("uic_z1", "wheels+accel", data["seeds"], ["target:3"])["target:3"]
+    assert all(r["watchdog"]["min_deceleration"] == 0 for r in plain)
+
+
 def test_a_target_with_the_drift_correction_runs_the_corrected_loop():
     """``target:X:drift`` is the tier's loop with the drift correction (named so); plain
     ``target:X`` is the environment's default loop."""
@@ -86,13 +104,26 @@ def test_a_target_with_the_drift_correction_runs_the_corrected_loop():
     two = fresh_stops.build_policy("target:2:drift:onset2:cal", "wheels+accel")
     assert two.loop.onset_two_sided and two.loop.onset_drift and two.loop.scale_calibration
     assert two.name == "slip_target_2kmh_drift_onset2_cal"
+    # the creep cap and its floor (a schedule): before ``:cal``, after the gain
+    sched = fresh_stops.build_policy("target:2:drift:onset2:creep0.02@0.5:cal", "wheels+accel")
+    assert (sched.loop.max_creep, sched.loop.creep_floor_kmh) == (0.02, 0.5)
+    assert sched.loop.onset_two_sided and sched.loop.scale_calibration
+    assert sched.name == "slip_target_2kmh_creep0.02at0.5_drift_onset2_cal"
+    cap = fresh_stops.build_policy("target:2:0.8x0.25:creep0.1", "wheels")
+    assert (cap.loop.max_creep, cap.loop.creep_floor_kmh, cap.loop.gain_scale_floor) == (
+        0.1, 2.0, 0.25)  # fmt: skip
+    assert cap.name == "slip_target_2kmh_creep0.1_pgain0.8x0.25"
     bad = (
         ("target:2:onset", "target:X[:drift[:onset|:onset2]][:GAINxFLOOR]"),
         ("target:2:drift:0.8", "target:X[:drift[:onset|:onset2]][:GAINxFLOOR]"),
         ("target:2:drift:ax0.25", "slip_target_gain_per_kmh: expected a number"),
         ("target:2:0.8x2", "slip_target_gain_scale_floor: must be in (0, 1]"),
         ("target:2:drift:0.8x0.25:x", "target:X[:drift[:onset|:onset2]][:GAINxFLOOR]"),
-        ("target:2:cal:drift", "target:X[:drift[:onset|:onset2]][:GAINxFLOOR][:cal]"),
+        ("target:2:cal:drift", "target:X[:drift[:onset|:onset2]][:GAINxFLOOR][:creepC[@F]][:cal]"),
+        ("target:2:creep2", "creepC[@F] with C in [0, 1] and F in [0, 30] km/h"),
+        ("target:2:creep0.1@40", "creep_floor_kmh: must be in [0, 30]"),
+        ("target:2:creepx", "creepC[@F]"),
+        ("target:2:creep0.1:drift", "target:X[:drift[:onset|:onset2]][:GAINxFLOOR]"),
     )
     for spec, words in bad:
         with pytest.raises(ValueError, match=re.escape(words)):
@@ -112,6 +143,10 @@ def test_a_target_with_the_drift_correction_runs_the_corrected_loop():
             "target:X[:drift[:onset|:onset2]][:GAINxFLOOR]",
         ),
         (["--rail", "dry", "--tier", "wheels", "--policy", "target:2:drift"], "needs --tier"),
+        (
+            ["--rail", "dry", "--policy", "classical", "--watchdog-floor", "-1"],
+            "--watchdog-floor: must be in [0, 5], got -1",
+        ),
     ],
 )
 def test_bad_input_is_one_line_and_no_file(tmp_path, capsys, argv, words):

@@ -406,6 +406,17 @@ def test_the_creep_cap_asks_for_at_most_its_fraction_of_the_reference():
     assert np.allclose(capped.command(slower, target), want, rtol=0, atol=1e-12)
     low = np.full_like(target, 1.0)
     assert np.array_equal(capped.command(slower, low), free.command(slower, low))
+    # another floor (a creep schedule, ``creep_floor_kmh``): 2 % of 100 km/h is 2 km/h, of
+    # 15 km/h 0.3 km/h, under the floor 0.5 km/h; a 1 km/h target is capped now too
+    sched = SlipTargetLoop(max_creep=0.02, creep_floor_kmh=0.5)
+    sched.bind(core)
+    sched.reset(np.array([0]))
+    for ref, want_kmh in ((fast, 2.0), (slow, 0.5), (slower, 0.5)):
+        want = free.command(ref, np.full_like(target, want_kmh))
+        assert np.allclose(sched.command(ref, target), want, rtol=0, atol=1e-12)
+    assert not np.allclose(sched.command(slower, low), free.command(slower, low))
+    with pytest.raises(ValueError, match=r"^creep_floor_kmh: must be in \[0, 30\], got -1"):
+        SlipTargetLoop(creep_floor_kmh=-1.0)
 
 
 def test_the_pressure_scaled_gain_is_the_fixed_gain_at_the_pressure_held():

@@ -135,7 +135,6 @@ def input_spec(policy: SB3Policy) -> dict[str, Any]:
         CAL_MAX_FACTOR,
         CAL_MIN_SPEED_MPS,
         DRIFT_MIN_SPAN_S,
-        MAX_CREEP_FLOOR_KMH,
         ONSET_MIN_S,
         REF_HELD_TOL_MPS,
     )
@@ -205,7 +204,7 @@ def input_spec(policy: SB3Policy) -> dict[str, Any]:
             # each target at most this fraction of the reference speed or the floor, where
             # that is more (0: no cap)
             "max_creep": loop.max_creep,
-            "max_creep_floor_kmh": MAX_CREEP_FLOOR_KMH,
+            "max_creep_floor_kmh": loop.creep_floor_kmh,
             # the aided reference less the drift its last anchor showed and the estimator did
             # not learn (rate over at least drift_min_span_s; baselines/slip_target.py)
             # (the estimator's rule it mirrors: accel_offset_gain of the miss learned at an
