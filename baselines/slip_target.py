@@ -50,8 +50,9 @@ what the sensor model measures) — exactly as the classical WSP (``classical.py
   ``docs/training.md``, "The slip-target loop's gain scaled by the pressure held");
 * the classical WSP's recovery rule: an axle re-accelerating faster than ``accel_hold_mps2``
   is not vented further (it is on its way back), at most held;
-* a target of at most ``max_creep`` of the reference speed, or ``MAX_CREEP_FLOOR_KMH`` (2 km/h)
-  where that is more (``target_kmh <= max(max_creep 3.6 v_ref, 2)``; 0: no cap, the loop
+* a target of at most ``max_creep`` of the reference speed, or the floor (``creep_floor_kmh``,
+  ``MAX_CREEP_FLOOR_KMH``, 2 km/h, in the environment) where that is more
+  (``target_kmh <= max(max_creep 3.6 v_ref, 2)``; 0: no cap, the loop
   before 2026-11-27's cap): a target fixed in km/h is a creep that grows as the train slows
   (8 km/h is 20 % at 40 km/h, 80 % at 10), far beyond the adhesion peak of every rail, and near
   standstill the wheel it asks for is nearly locked. With the cap, 0.2 by default, an 8 km/h
@@ -168,7 +169,8 @@ ONSET_MIN_S = 0.2
 # model's scale errors are at most 0.1)
 CAL_MIN_SPEED_MPS = 10.0 / 3.6
 CAL_MAX_FACTOR = 0.1
-# the creep cap never asks for less than this (km/h of measured slip; a lower target is kept)
+# the creep cap's default floor: it never asks for less than this (km/h of measured slip; a
+# lower target is kept); the environment's loop always has it, a probe may lower it
 MAX_CREEP_FLOOR_KMH = 2.0
 
 

@@ -32,7 +32,7 @@ COMMANDS = (
     ("simulate", "--policy", "classical"),
     ("evaluate", "--policy", "ppo_bc_uic_z1", "--policy", "classical", "--suite", "quick",
      "--no-progress"),
-    ("bench", "--quick"),  # the kernel's parallel path too (what training uses from 8 cores)
+    ("bench", "--quick"),  # the kernel's parallel path too (evaluation's from 64 environments)
 )  # fmt: skip
 
 

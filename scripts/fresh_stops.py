@@ -33,6 +33,7 @@ supervision, not the benchmark: the header says so).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import sys
@@ -49,6 +50,7 @@ from wsp_env.baselines.slip_target import (
     parse_pressure_gain,
 )
 from wsp_env.core.config import check_number, load_vehicle
+from wsp_env.core.sensors import WatchdogConfig
 from wsp_env.envs import make_core
 from wsp_env.envs.tiers import TIERS, VERSION, benchmark_env_kwargs
 from wsp_env.evaluation.benchmark import DAMAGE_CRITERIA, POLICY_KEYS
@@ -58,6 +60,7 @@ from wsp_env.policy import make_policy
 
 FRESH_SEED_BASE = 9_800_000  # above the fine-tune pool's 9,510,000 + i, i < 100,000
 MAX_DRAW = 100_000
+WATCHDOG_FIELDS = {f.name: f for f in dataclasses.fields(WatchdogConfig)}
 
 
 def benchmark_setup(vehicle: str, tier: str) -> tuple[Any, float, dict[str, Any]]:
@@ -84,21 +87,30 @@ def parse_creep(text: str, where: str) -> tuple[float, float]:
     """``creepC`` or ``creepC@F`` as the loop's ``(max_creep, creep_floor_kmh)`` (the floor 2
     km/h without ``@F``), checked as the loop checks them; else a one-line ``ValueError``
     beginning with ``where``."""
-    cap, _, floor = text.removeprefix("creep").partition("@")
+    cap, at, floor = text.removeprefix("creep").partition("@")
+
+    def number(part: str, name: str) -> float:
+        try:
+            return float(part)
+        except ValueError:
+            raise ValueError(f"{name}: expected a number, got {part!r}") from None
+
     try:
-        creep = float(cap)
-        creep_floor = float(floor) if floor else MAX_CREEP_FLOOR_KMH
+        creep = number(cap, "slip_target_max_creep")
+        creep_floor = number(floor, "creep_floor_kmh") if at else MAX_CREEP_FLOOR_KMH
         SlipTargetLoop(max_creep=creep, creep_floor_kmh=creep_floor)  # the loop's own checks
     except ValueError as err:
-        msg = f"{where}: creepC[@F] with C in [0, 1] and F in [0, 30] km/h ({err})"
-        raise ValueError(msg) from None
+        raise ValueError(f"{where}: creepC[@F], the loop's cap and floor ({err})") from None
+    if creep == 0.0 and at:
+        raise ValueError(f"{where}: creep0 is no cap, so a floor means nothing")
     return creep, creep_floor
 
 
 def build_policy(spec: str, tier: str) -> Any:
     """``target:X`` as a constant target on the tier's default loop, ``target:X:drift`` with
     the loop's drift correction, ``target:X[:drift]:GxF`` with its gain G per km/h scaled by
-    the pressure held, never below F of it (``slip_target.parse_pressure_gain``), ``:cal``
+    the pressure held, never below F of it (``slip_target.parse_pressure_gain``),
+    ``:creepC[@F]`` with the creep cap C and its floor F km/h (``parse_creep``), ``:cal``
     last with the wheel-scale calibration; anything else
     as ``wsp-env benchmark --policy`` builds it."""
     if spec.startswith("target:"):
@@ -143,7 +155,7 @@ def run(
     """Every policy on the stops of ``seeds``: each policy's run results, keyed by its spec."""
     veh, max_time_s, kw = benchmark_setup(vehicle, tier)
     if watchdog_floor is not None:  # a probe of the supervision, not the benchmark's
-        kw = {**kw, "watchdog": {"min_decel_mps2": watchdog_floor}}
+        kw = {**kw, "watchdog": {**(kw["watchdog"] or {}), "min_decel_mps2": watchdog_floor}}
     runs = [Run(f"fresh_{s}", s, {}, dict(DAMAGE_CRITERIA), veh) for s in seeds]
     out = {}
     for spec in specs:
@@ -196,7 +208,8 @@ def main(argv: list[str] | None = None) -> int:
         "--watchdog-floor",
         type=float,
         default=None,
-        help="the supervision's floor, m/s^2 (a probe; default: the benchmark's)",
+        help="the supervision's floor, m/s^2 (0: no supervision; a probe; default: the "
+        "benchmark's)",
     )
     args = ap.parse_args(argv)
     try:
@@ -207,8 +220,9 @@ def main(argv: list[str] | None = None) -> int:
             raise ValueError(f"--rail: {args.rail!r} is not one of {', '.join(rails)}")
         for spec in args.policy:  # every policy checked before any stop runs
             build_policy(spec, args.tier)
-        if args.watchdog_floor is not None:  # the watchdog's own check, before any stop
-            check_number(args.watchdog_floor, "--watchdog-floor", ge=0.0, le=5.0)
+        if args.watchdog_floor is not None:  # the watchdog's own bounds, before any stop
+            bounds = WATCHDOG_FIELDS["min_decel_mps2"].metadata
+            check_number(args.watchdog_floor, "--watchdog-floor", **bounds)
         seeds = rail_seeds(args.vehicle, args.tier, args.rail, args.draw)
         if not seeds:
             raise ValueError(f"--draw: no {args.rail} stop among {args.draw} seeds")
@@ -221,7 +235,8 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{len(seeds)} {args.rail} stops among seeds {FRESH_SEED_BASE}-{last} "
           f"({args.vehicle}, {args.tier}, {VERSION})")  # fmt: skip
     if args.watchdog_floor is not None:
-        print(f"supervision floor {args.watchdog_floor:g} m/s^2: a probe, not the benchmark's")
+        off = " (no supervision)" if args.watchdog_floor == 0.0 else ""
+        print(f"supervision floor {args.watchdog_floor:g} m/s^2{off}: a probe, not the benchmark's")
     classical = results.get("classical")
     sums = {spec: summary(res, classical) for spec, res in results.items()}
     for spec, s in sums.items():
