@@ -380,6 +380,9 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         # the time since no wheel held the estimator's reference up or it anchored (s): what
         # an upward correction multiplies with ``onset_two_sided``
         self.unheld_s = np.zeros(n)
+        # that time restarted in the last period with a raise standing: the tracked reference
+        # stepped down by the raise, which is no fall of the train (``advance``)
+        self.raise_dropped = np.zeros(n, dtype=bool)
         # a rate read from an anchor's jump since the stop began (the onset reading yields)
         self.rate_read = np.zeros(n, dtype=bool)
         # the onset reading (``onset_drift``): the accelerometer's reading column, each axle's
@@ -424,6 +427,7 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         self.anchored[env_ids] = False
         self.since_anchor[env_ids] = 0.0
         self.unheld_s[env_ids] = 0.0
+        self.raise_dropped[env_ids] = False
         self.drift[env_ids] = 0.0
         self.rate_read[env_ids] = False
         self.onset_open[env_ids] = True
@@ -512,6 +516,7 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
             # only for the time no wheel has held the estimator's reference up: a wheel within
             # REF_HELD_TOL_MPS of it, or an anchor, restarts that time
             held = (v_ref <= fastest + REF_HELD_TOL_MPS) | anchored
+            self.raise_dropped = held & (self.unheld_s > 0.0) & (self.drift < 0.0)
             self.unheld_s = np.where(held, 0.0, self.unheld_s + dt)
             corrected = np.where(self.drift < 0.0, v_ref - self.drift * self.unheld_s, corrected)
         return np.maximum(corrected, np.minimum(fastest, v_ref))
@@ -646,6 +651,8 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
             known &= ~self.anchored
         if onset_set is not None:  # the step the onset reading's drift makes is no fall either
             known &= ~onset_set
+        if self.onset_two_sided:  # nor the raise's drop when a wheel holds the reference again
+            known &= ~self.raise_dropped
         self.decel_ref = np.where(known, np.clip(slope, 0.0, self.ref_limit), self.decel_ref)
         self.prev_ref, self.prev_age = v_ref, age
         self.vent[...] = False

@@ -979,8 +979,9 @@ def test_the_two_sided_onset_reading_raises_the_reference_only_while_no_wheel_ho
     tracked reference is the estimator's while a wheel holds that up (within 0.1 km/h of the
     fastest reading); once every wheel reads below it, it rises over it at 0.2 m/s a second of
     the time since (float32 speeds: 1e-4), and a wheel back at the reference restarts that
-    time (as an anchor does). A reading of too little deceleration sets what it did. Without
-    the onset reading the setting is refused in one line."""
+    time (as an anchor does): the raise's drop is no fall of the train. A reading of too
+    little deceleration sets what it did. Without the onset reading the setting is refused in
+    one line."""
     assert _onset_drift(0.5, 30) == 0.0
     assert _onset_drift(0.1, 30, two_sided=True) == pytest.approx(0.2, abs=1e-3)  # as before
     keep: list = []
@@ -1003,7 +1004,11 @@ def test_the_two_sided_onset_reading_raises_the_reference_only_while_no_wheel_ho
     np.testing.assert_allclose(lifts, 0.2 * dt * np.arange(1, 26), atol=1e-4)
     wheels = np.full(na, v - 1.0)
     wheels[2] = v - 0.5 + 0.05 / 3.6  # one wheel back at the reference: held
+    assert loop.decel_ref[0] == 0.0  # the estimator's reference stands still, the raise rises
     assert period(wheels, v - 0.5) == pytest.approx(0.0, abs=1e-4)
+    # the tracked reference dropped 0.1 m/s in one period: no fall of the train, so the lead's
+    # reference deceleration keeps the period before's (not 5 m/s^2, clipped to the limit)
+    assert loop.raise_dropped[0] and loop.decel_ref[0] == 0.0
     assert period(np.full(na, v - 1.0), v - 0.5) == pytest.approx(0.2 * dt, abs=1e-4)
     assert period(np.full(na, v - 1.0), v - 0.5) == pytest.approx(0.4 * dt, abs=1e-4)
     with pytest.raises(ValueError, match=r"^slip_target_onset_two_sided: needs slip_target_onset"):
