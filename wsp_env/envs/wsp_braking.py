@@ -350,6 +350,10 @@ num_envs=N, **kwargs)``:
 * v3, 2026-12-07 (no new version; off by default, the observation unchanged without it): the
   stop's mean slip target may be observed (``memory_target_mean``, slip-target mode). A policy
   file that does not name it loads with ``False``.
+* v3, 2026-12-07, later (no new version; only with ``slip_target_onset_two_sided``): the
+  tracked reference's drop when a wheel holds the estimator's reference again is no longer
+  read as the reference's deceleration by the loop's lead term (figures of the option moved by
+  decimetres a stop; docs/training.md, "The onset reading's other sense").
 """
 
 from __future__ import annotations
