@@ -221,7 +221,8 @@ def input_spec(policy: SB3Policy) -> dict[str, Any]:
             "onset_min_s": ONSET_MIN_S,
             # both senses of the offset; the upward correction times only the time no wheel
             # has held the estimator's reference up (within ref_held_tol_kmh of the fastest
-            # reading) since the last anchor
+            # reading) since the last anchor; its drop when one holds it again is no fall of
+            # the reference for the lead term (as the onset's and the anchors' steps)
             "onset_two_sided": loop.onset_two_sided,
             "ref_held_tol_kmh": REF_HELD_TOL_MPS * 3.6,
             "onset_free_share": [float(x) for x in loop.free_share],
