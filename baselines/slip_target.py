@@ -52,7 +52,7 @@ what the sensor model measures) — exactly as the classical WSP (``classical.py
   is not vented further (it is on its way back), at most held;
 * a target of at most ``max_creep`` of the reference speed, or the floor (``creep_floor_kmh``,
   ``MAX_CREEP_FLOOR_KMH``, 2 km/h, in the environment) where that is more
-  (``target_kmh <= max(max_creep 3.6 v_ref, 2)``; 0: no cap, the loop
+  (``target_kmh <= max(max_creep 3.6 v_ref, floor)``; 0: no cap, the loop
   before 2026-11-27's cap): a target fixed in km/h is a creep that grows as the train slows
   (8 km/h is 20 % at 40 km/h, 80 % at 10), far beyond the adhesion peak of every rail, and near
   standstill the wheel it asks for is nearly locked. With the cap, 0.2 by default, an 8 km/h
@@ -651,8 +651,7 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
             known &= ~self.anchored
         if onset_set is not None:  # the step the onset reading's drift makes is no fall either
             known &= ~onset_set
-        if self.onset_two_sided:  # nor the raise's drop when a wheel holds the reference again
-            known &= ~self.raise_dropped
+        known &= ~self.raise_dropped  # nor the two-sided raise's drop (``_correct_drift``)
         self.decel_ref = np.where(known, np.clip(slope, 0.0, self.ref_limit), self.decel_ref)
         self.prev_ref, self.prev_age = v_ref, age
         self.vent[...] = False
@@ -718,9 +717,9 @@ def loop_suffix(loop: SlipTargetLoop) -> str:
     wheel-scale calibration
     (``""`` for the default loop), so that two loops never share a name."""
     gate = "" if loop.release == DEFAULT_RELEASE else f"_{loop.release}"
-    cap = "" if loop.max_creep == DEFAULT_MAX_CREEP else f"_creep{loop.max_creep:g}"
-    if loop.creep_floor_kmh != MAX_CREEP_FLOOR_KMH:
-        cap = f"_creep{loop.max_creep:g}at{loop.creep_floor_kmh:g}"
+    floor = "" if loop.creep_floor_kmh == MAX_CREEP_FLOOR_KMH else f"at{loop.creep_floor_kmh:g}"
+    cap = "" if loop.max_creep == DEFAULT_MAX_CREEP and not floor else f"_creep{loop.max_creep:g}"
+    cap += floor
     scaled = ""
     if loop.gain_scale_floor != DEFAULT_GAIN_SCALE_FLOOR:
         scaled = f"_pgain{loop.gain_per_kmh:g}x{loop.gain_scale_floor:g}"
