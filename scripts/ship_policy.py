@@ -4,6 +4,9 @@ user needs to trust and reproduce it.
     .venv/bin/python scripts/ship_policy.py runs/train/ppo_residual_uic_z1 \
         --name ppo_residual_uic_z1 [--model best_model]
 
+``--model student``: the run's imitation warm start (``student.zip``, written before PPO's
+first update), its figures those of the warm start alone.
+
 Writes `agents/pretrained/NAME.zip` (the model, its metadata renamed NAME),
 `NAME.vecnormalize.pkl` (its observation normalisation), `NAME.yaml` (the run's exact config,
 with the command that trained it), `NAME.json` (timesteps, wall time, throughput, machine, the
@@ -29,7 +32,10 @@ from wsp_env.policy import model_metadata, pretrained_dir, write_model_metadata
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def learning_curve(run: Path, out_png: Path, title: str) -> None:
+def learning_curve(run: Path, out_png: Path, title: str, student: bool = False) -> None:
+    """The run's curves; ``student``: the imitation warm start's alone (its DAgger rounds and
+    its validation beside the classical WSP's), the reinforcement learning after it not being
+    part of what ships."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -38,6 +44,35 @@ def learning_curve(run: Path, out_png: Path, title: str) -> None:
     rows = list(csv.DictReader((run / "progress.csv").open()))
     validation = json.loads((run / "validation.json").read_text())
     pre_path = run / "pretrain.json"
+    if student:
+        pre = json.loads(pre_path.read_text())
+        fig, (ax0, ax2) = plt.subplots(1, 2, figsize=(11, 4))
+        rounds = pre["rounds"]
+        ax0.plot([r["round"] for r in rounds], [r["actor_mse"] for r in rounds], "o-", ms=3,
+                 label="actor MSE on the data set")  # fmt: skip
+        drove = [(r["round"], r["student_vs_teacher_mae"]) for r in rounds
+                 if r["student_vs_teacher_mae"] is not None]  # fmt: skip
+        ax0.plot(*zip(*drove, strict=True), "s-", ms=3, label="|student - teacher|, student drives")
+        steps = pre["env_steps"] / 1e6
+        ax0.set(xlabel="DAgger round", ylabel="action error",
+                title=f"imitation of {pre['teacher']} ({steps:.1f} M steps)")  # fmt: skip
+        ax0.legend(fontsize=8)
+        v, c = pre["validation"], validation["classical"]
+        keys = (("mean stop [m]", "mean_stopping_distance_m"),
+                ("sliding energy [kJ]", "mean_sliding_energy_kJ"),
+                ("air [l]", "mean_air_litres"))  # fmt: skip
+        x = range(len(keys))
+        ax2.bar([i - 0.2 for i in x], [c[k] for _, k in keys], 0.4, label="classical WSP")
+        ax2.bar([i + 0.2 for i in x], [v[k] for _, k in keys], 0.4, label="student")
+        ax2.set_xticks(list(x), [label for label, _ in keys])
+        ax2.set(title=f"validation ({c['runs']} runs): passed {v['passed']} against "
+                      f"{c['passed']}")  # fmt: skip
+        ax2.legend(fontsize=8)
+        fig.suptitle(title)
+        fig.tight_layout()
+        fig.savefig(out_png, dpi=90)
+        plt.close(fig)
+        return
     if pre_path.exists():  # the imitation warm start: its rounds first
         fig, (ax0, ax1, ax2) = plt.subplots(1, 3, figsize=(16, 4))
         rounds = json.loads(pre_path.read_text())["rounds"]
@@ -90,7 +125,7 @@ def learning_curve(run: Path, out_png: Path, title: str) -> None:
     plt.close(fig)
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("run", help="a run folder of `wsp-env train`")
     ap.add_argument("--name", required=True, help="the shipped policy's name")
@@ -99,9 +134,11 @@ def main() -> None:
         "--trained-by", action="append", default=None,
         help="the commands that trained the run, as run (default: the plain one)",
     )  # fmt: skip
-    args = ap.parse_args()
+    ap.add_argument("--out-dir", type=Path, default=None,
+                    help="where to write (default: agents/pretrained)")  # fmt: skip
+    args = ap.parse_args(argv)
     run = Path(args.run)
-    out = pretrained_dir()
+    out = args.out_dir or pretrained_dir()
     out.mkdir(parents=True, exist_ok=True)
     name = args.name
     src = run / f"{args.model}.zip"
@@ -162,10 +199,22 @@ def main() -> None:
                             "rounds": len(pre["rounds"]), "wall_time_s": wall,
                             "validation": pre["validation"]}  # fmt: skip
         info["wall_time_s"] += wall
+        if args.model == "student":  # the warm start itself: no RL step made these weights
+            info["timesteps_trained"] = 0
+            info["shipped_at_timesteps"] = 0
+            info["wall_time_s"] = wall
+            info["env_steps_per_s"] = pre["env_steps"] / wall
+            info["wall_time_note"] = (
+                "the imitation warm start alone (the student is the policy it wrote before any "
+                "reinforcement-learning update); env_steps_per_s: its environment steps (teacher "
+                "and student driving) over its wall time"
+            )
     (out / f"{name}.json").write_text(json.dumps(info, indent=1) + "\n")
-    learning_curve(run, out / f"{name}_learning_curve.png", f"{name} ({train['algo']})")
+    student = args.model == "student"
+    kind = "imitation student" if student else train["algo"]
+    learning_curve(run, out / f"{name}_learning_curve.png", f"{name} ({kind})", student)
     for p in sorted(out.glob(f"{name}*")):
-        print(f"wrote {p.relative_to(ROOT)} ({p.stat().st_size / 1024:.0f} KiB)")
+        print(f"wrote {p} ({p.stat().st_size / 1024:.0f} KiB)")
 
 
 if __name__ == "__main__":

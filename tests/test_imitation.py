@@ -8,6 +8,7 @@ import json
 import numpy as np
 import pytest
 import yaml
+from conftest import script
 from test_train import train_config
 
 from wsp_env.cli import main
@@ -73,6 +74,25 @@ def test_pretraining_moves_the_student_toward_the_teacher(tmp_path):
     plain = _teacher_gap(SB3Policy(runs["plain"] / "model.zip"), 11)
     bc = _teacher_gap(SB3Policy(runs["bc"] / "model.zip"), 11)
     assert bc < plain
+
+    # scripts/ship_policy.py --model student ships the warm start with its own figures (the
+    # shipped students: agents/pretrained/bc_*), acting as the run's student.zip
+    shipped = tmp_path / "shipped"
+    script("ship_policy").main([str(runs["bc"]), "--name", "tiny_bc", "--model", "student",
+                                "--out-dir", str(shipped)])  # fmt: skip
+    info = json.loads((shipped / "tiny_bc.json").read_text())
+    assert info["timesteps_trained"] == 0 and info["shipped_at_timesteps"] == 0
+    assert info["wall_time_s"] == record["wall_time_s"] > 0
+    assert info["env_steps_per_s"] == pytest.approx(record["env_steps"] / record["wall_time_s"])
+    assert info["best_validation"] == record["validation"]
+    assert (shipped / "tiny_bc_learning_curve.png").stat().st_size > 0
+    assert "wsp-env train --config" in (shipped / "tiny_bc.yaml").read_text()
+    ours, theirs = SB3Policy(shipped / "tiny_bc.zip"), SB3Policy(runs["bc"] / "student.zip")
+    assert ours.name == "tiny_bc"
+    a, b = ours.model.policy.state_dict(), theirs.model.policy.state_dict()
+    assert a.keys() == b.keys() and all((a[k] == b[k]).all() for k in a)
+    for x, y in zip(ours.normalisation(), theirs.normalisation(), strict=True):
+        np.testing.assert_array_equal(x, y)
 
 
 @pytest.mark.parametrize(
