@@ -22,9 +22,11 @@ demo: $(STAMP)
 		--plot runs/demo/simulate_classical.png --trace runs/demo/trace_classical
 	$(BIN)/wsp-env calibrate runs/demo/trace_classical.csv --json runs/demo/calibrate.json \
 		--report runs/demo/calibration --export runs/demo/calibrated.yaml
-	$(BIN)/wsp-env evaluate --policy classical --policy ppo_bc_uic_z1 --policy none --policy oracle \
+	$(BIN)/wsp-env evaluate --policy classical --policy bc_slip_target_accel_uic_z1 \
+		--policy ppo_bc_uic_z1 --policy none --policy oracle \
 		--suite quick --json runs/demo/evaluate.json --report runs/demo/report
-	$(BIN)/wsp-env benchmark --policy classical --policy ppo_bc_uic_z1 --tier wheels+accel \
+	$(BIN)/wsp-env benchmark --policy classical --policy bc_slip_target_accel_uic_z1 \
+		--policy ppo_bc_uic_z1 --tier wheels+accel \
 		--runs 30 --json runs/demo/benchmark.json --report runs/demo/benchmark
 	$(BIN)/wsp-env rig --policy classical --rail soap --mu-contaminated 0.08 --pattern uniform \
 		--speed-kmh 120 --json runs/demo/rig.json --plot runs/demo/rig.png

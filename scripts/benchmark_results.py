@@ -4,7 +4,7 @@ sensor tiers, and the stops outside the old training range re-run through `wsp-e
     .venv/bin/wsp-env benchmark --policy none --policy classical --policy oracle \\
         --tier wheels --json runs/bench/wheels.json
     .venv/bin/wsp-env benchmark --policy classical --policy oracle --policy ppo_bc_uic_z1 \\
-        --tier wheels+accel --json runs/bench/accel.json
+        --policy bc_slip_target_accel_uic_z1 --tier wheels+accel --json runs/bench/accel.json
     .venv/bin/python scripts/benchmark_results.py --wheels runs/bench/wheels.json \\
         --accel runs/bench/accel.json --markdown docs/results/benchmark.md
 
@@ -40,6 +40,7 @@ COLUMNS = (
     ("classical (wheels)", "classical", False),
     ("classical (wheels+accel)", "classical", True),
     ("ppo_bc_uic_z1 (wheels+accel)", "ppo_bc_uic_z1", True),
+    ("bc_slip_target_accel_uic_z1 (wheels+accel)", "bc_slip_target_accel_uic_z1", True),
     ("oracle", "oracle", False),
 )
 SEED = 3301

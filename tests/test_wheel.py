@@ -29,6 +29,17 @@ SOURCES = ("wsp_env", "baselines", "agents", "configs", "docs", "pyproject.toml"
 SHIPPED = sorted(p.stem for p in (ROOT / "agents" / "pretrained").glob("*.zip"))
 
 
+def _shipped_by_vehicle() -> dict[str, list[str]]:
+    """The shipped policies by the vehicle each was trained for (its model file's metadata)."""
+    from wsp_env.policy import model_metadata
+
+    out: dict[str, list[str]] = {}
+    for name in SHIPPED:
+        meta = model_metadata(ROOT / "agents" / "pretrained" / f"{name}.zip")
+        out.setdefault(meta.get("vehicle") or "uic_z1", []).append(name)
+    return out
+
+
 @pytest.fixture(scope="module")
 def built(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("wheel")
@@ -207,13 +218,16 @@ def test_every_command_runs_from_a_fresh_install_then_learning_with_rl_and_expor
     # [rl,export] added to the same install: the learning commands run, and every shipped
     # policy loads from the installed package and stops on the evaluation path
     _add_extras(site.venv, tmp, wheel, "[rl,export]")
-    site.ok("simulate", "--policy", SHIPPED[0], "--speed-kmh", "80", "--json", "sim.json")
-    assert site.read("sim.json")["policy"] == SHIPPED[0]
-    policies = [a for p in ["classical", *SHIPPED] for a in ("--policy", p)]
-    site.ok("evaluate", "--suite", "quick", *policies, "--no-progress", "--json", "eval.json")
-    runs = site.read("eval.json")["runs"]
-    assert {r["policy"] for r in runs} == {"classical", *SHIPPED}
-    assert all(r["stopped"] for r in runs)
+    uic = _shipped_by_vehicle()["uic_z1"][0]  # simulate's default vehicle
+    site.ok("simulate", "--policy", uic, "--speed-kmh", "80", "--json", "sim.json")
+    assert site.read("sim.json")["policy"] == uic
+    for vehicle, names in _shipped_by_vehicle().items():  # each on the vehicle it was trained for
+        policies = [a for p in ["classical", *names] for a in ("--policy", p)]
+        site.ok("evaluate", "--vehicle", vehicle, "--suite", "quick", *policies, "--no-progress",
+                "--json", f"eval_{vehicle}.json")  # fmt: skip
+        runs = site.read(f"eval_{vehicle}.json")["runs"]
+        assert {r["policy"] for r in runs} == {"classical", *names}
+        assert all(r["stopped"] for r in runs)
     cfg = train_config(tmp, n_timesteps=256, checkpoint_every_timesteps=256)
     site.ok("train", "--config", str(cfg), "--out", "run", "--no-progress", "--json", "train.json")
     result = site.read("train.json")
