@@ -139,6 +139,8 @@ def main(argv: list[str] | None = None) -> None:
     args = ap.parse_args(argv)
     run = Path(args.run)
     out = args.out_dir or pretrained_dir()
+    if args.model == "student" and not (run / "pretrain.json").exists():
+        raise SystemExit(f"{run}: no pretrain.json: no imitation warm start to ship")
     out.mkdir(parents=True, exist_ok=True)
     name = args.name
     src = run / f"{args.model}.zip"
@@ -202,6 +204,7 @@ def main(argv: list[str] | None = None) -> None:
         if args.model == "student":  # the warm start itself: no RL step made these weights
             info["timesteps_trained"] = 0
             info["shipped_at_timesteps"] = 0
+            info["best_validation"] = pre["validation"]  # the warm start's own, not RL's best
             info["wall_time_s"] = wall
             info["env_steps_per_s"] = pre["env_steps"] / wall
             info["wall_time_note"] = (

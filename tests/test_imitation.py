@@ -81,6 +81,10 @@ def test_pretraining_moves_the_student_toward_the_teacher(tmp_path):
     script("ship_policy").main([str(runs["bc"]), "--name", "tiny_bc", "--model", "student",
                                 "--out-dir", str(shipped)])  # fmt: skip
     info = json.loads((shipped / "tiny_bc.json").read_text())
+    with pytest.raises(SystemExit, match=r"no pretrain\.json: no imitation warm start"):
+        script("ship_policy").main([str(runs["plain"]), "--name", "x", "--model", "student",
+                                    "--out-dir", str(tmp_path / "refused")])  # fmt: skip
+    assert not (tmp_path / "refused").exists()
     assert info["timesteps_trained"] == 0 and info["shipped_at_timesteps"] == 0
     assert info["wall_time_s"] == record["wall_time_s"] > 0
     assert info["env_steps_per_s"] == pytest.approx(record["env_steps"] / record["wall_time_s"])
