@@ -88,16 +88,9 @@ def parse_creep(text: str, where: str) -> tuple[float, float]:
     km/h without ``@F``), checked as the loop checks them; else a one-line ``ValueError``
     beginning with ``where``."""
     cap, at, floor = text.removeprefix("creep").partition("@")
-
-    def number(part: str, name: str) -> float:
-        try:
-            return float(part)
-        except ValueError:
-            raise ValueError(f"{name}: expected a number, got {part!r}") from None
-
     try:
-        creep = number(cap, "slip_target_max_creep")
-        creep_floor = number(floor, "creep_floor_kmh") if at else MAX_CREEP_FLOOR_KMH
+        creep = check_number(cap, "slip_target_max_creep")
+        creep_floor = check_number(floor, "creep_floor_kmh") if at else MAX_CREEP_FLOOR_KMH
         SlipTargetLoop(max_creep=creep, creep_floor_kmh=creep_floor)  # the loop's own checks
     except ValueError as err:
         raise ValueError(f"{where}: creepC[@F], the loop's cap and floor ({err})") from None

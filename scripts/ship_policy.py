@@ -24,12 +24,26 @@ import os
 import platform
 import shutil
 from pathlib import Path
+from typing import Any
 
 import yaml
 
 from wsp_env.policy import model_metadata, pretrained_dir, write_model_metadata
 
 ROOT = Path(__file__).resolve().parents[1]
+
+
+def imitation_panel(ax: Any, pre: dict[str, Any], title: str) -> None:
+    """The imitation warm start's DAgger rounds (``pretrain.json``): the actor's error on the
+    data set, and its distance to the teacher where the student drove."""
+    rounds = pre["rounds"]
+    ax.plot([r["round"] for r in rounds], [r["actor_mse"] for r in rounds], "o-", ms=3,
+            label="actor MSE on the data set")  # fmt: skip
+    drove = [(r["round"], r["student_vs_teacher_mae"]) for r in rounds
+             if r["student_vs_teacher_mae"] is not None]  # fmt: skip
+    ax.plot(*zip(*drove, strict=True), "s-", ms=3, label="|student - teacher|, student drives")
+    ax.set(xlabel="DAgger round", ylabel="action error", title=title)
+    ax.legend(fontsize=8)
 
 
 def learning_curve(run: Path, out_png: Path, title: str, student: bool = False) -> None:
@@ -47,16 +61,8 @@ def learning_curve(run: Path, out_png: Path, title: str, student: bool = False) 
     if student:
         pre = json.loads(pre_path.read_text())
         fig, (ax0, ax2) = plt.subplots(1, 2, figsize=(11, 4))
-        rounds = pre["rounds"]
-        ax0.plot([r["round"] for r in rounds], [r["actor_mse"] for r in rounds], "o-", ms=3,
-                 label="actor MSE on the data set")  # fmt: skip
-        drove = [(r["round"], r["student_vs_teacher_mae"]) for r in rounds
-                 if r["student_vs_teacher_mae"] is not None]  # fmt: skip
-        ax0.plot(*zip(*drove, strict=True), "s-", ms=3, label="|student - teacher|, student drives")
         steps = pre["env_steps"] / 1e6
-        ax0.set(xlabel="DAgger round", ylabel="action error",
-                title=f"imitation of {pre['teacher']} ({steps:.1f} M steps)")  # fmt: skip
-        ax0.legend(fontsize=8)
+        imitation_panel(ax0, pre, f"imitation of {pre['teacher']} ({steps:.1f} M steps)")
         v, c = pre["validation"], validation["classical"]
         keys = (("mean stop [m]", "mean_stopping_distance_m"),
                 ("sliding energy [kJ]", "mean_sliding_energy_kJ"),
@@ -75,14 +81,7 @@ def learning_curve(run: Path, out_png: Path, title: str, student: bool = False) 
         return
     if pre_path.exists():  # the imitation warm start: its rounds first
         fig, (ax0, ax1, ax2) = plt.subplots(1, 3, figsize=(16, 4))
-        rounds = json.loads(pre_path.read_text())["rounds"]
-        ax0.plot([r["round"] for r in rounds], [r["actor_mse"] for r in rounds], "o-", ms=3,
-                 label="actor MSE on the data set")  # fmt: skip
-        drove = [(r["round"], r["student_vs_teacher_mae"]) for r in rounds
-                 if r["student_vs_teacher_mae"] is not None]  # fmt: skip
-        ax0.plot(*zip(*drove, strict=True), "s-", ms=3, label="|student - teacher|, student drives")
-        ax0.set(xlabel="DAgger round", ylabel="action error", title="imitation warm start")
-        ax0.legend(fontsize=8)
+        imitation_panel(ax0, json.loads(pre_path.read_text()), "imitation warm start")
     else:
         fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4))
     steps = [float(r["time/total_timesteps"]) / 1e6 for r in rows]
