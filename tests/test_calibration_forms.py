@@ -49,6 +49,33 @@ def test_first_order_holds_its_gain_and_delays_by_its_constant():
     assert area == pytest.approx(0.4, rel=0.01)  # the step is sampled: within a sample's share
 
 
+def test_first_order_compiled_pass_is_the_recurrence_bit_for_bit():
+    """The compiled pass (``recurrence.lag_pass``) gives the per-sample recurrence of its
+    docstring, written out here in plain Python, to the last bit: uneven sampling, a column
+    with a zero time constant, a scalar constant broadcast over the columns."""
+    rng = np.random.default_rng(3)
+    for n, m, tc in ((2, 1, 0.2), (300, 5, None), (1_000, 3, 0.0), (57, 7, 1.5)):
+        t = np.cumsum(rng.uniform(0.005, 0.05, n))
+        u = rng.normal(size=(n, m))
+        tcs = rng.uniform(0.01, 2.0, m) if tc is None else np.full(m, tc)
+        if tc is None:
+            tcs[1] = 0.0
+        live = tcs > 0.0
+        tcu = np.where(live, tcs, 1.0)
+        # the factors as first_order computes them (an array's exp, which may differ from a
+        # scalar's in the last bit on some CPUs); the recurrence one sample at a time
+        a = np.exp(-np.diff(t)[:, None] / tcu[None, :])
+        want = np.empty_like(u)
+        want[0] = u[0]
+        for k in range(1, n):
+            for c in range(m):
+                ts = tcu[c] * ((u[k, c] - u[k - 1, c]) / (t[k] - t[k - 1]))
+                want[k, c] = u[k, c] - ts + (want[k - 1, c] - u[k - 1, c] + ts) * a[k - 1, c]
+        want = np.where(live[None, :], want, u)
+        got = first_order(t, u, tcs if tc is None else tc)
+        assert np.array_equal(got, want), (n, m, tc)
+
+
 # ---- lag shapes on independent traces -------------------------------------------------------
 
 

@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from wsp_env.calibration.adhesion_estimate import censored_points, fit_base_law, pooled_points
+from wsp_env.calibration.recurrence import lag_pass
 from wsp_env.calibration.traces import Trace, braked
 
 MIN_SPEED_KMH = 10.0
@@ -218,7 +219,7 @@ def first_order(t: np.ndarray, u: np.ndarray, tc: np.ndarray) -> np.ndarray:
     """``u`` (samples x columns) through first-order lags ``tc dy/dt = u - y`` (one time constant
     per column, s; 0 passes the column through), exact for ``u`` linear between samples (the
     same reading of the log as the balance's trapezoid integral), starting at rest on ``u[0]``.
-    Vectorised over the columns; one pass over the samples."""
+    One compiled pass over the samples (``recurrence.lag_pass``)."""
     u = np.asarray(u, dtype=np.float64)
     tc = np.broadcast_to(np.asarray(tc, dtype=np.float64), u.shape[1:])
     live = tc > 0.0
@@ -226,9 +227,8 @@ def first_order(t: np.ndarray, u: np.ndarray, tc: np.ndarray) -> np.ndarray:
     dt = np.diff(t)
     a = np.exp(-dt[:, None] / tcs[None, :])  # (samples - 1, columns)
     slope = np.diff(u, axis=0) / dt[:, None]
-    y = np.empty_like(u)
-    y[0] = u[0]
-    for k in range(1, len(t)):
-        ts = tcs * slope[k - 1]
-        y[k] = u[k] - ts + (y[k - 1] - u[k - 1] + ts) * a[k - 1]
+    cols = u.reshape(len(u), -1)
+    y = lag_pass(np.ascontiguousarray(cols), np.ascontiguousarray(a.reshape(len(a), -1)),
+                 np.ascontiguousarray(slope.reshape(len(slope), -1)),
+                 np.ascontiguousarray(tcs.reshape(-1))).reshape(u.shape)  # fmt: skip
     return np.where(live[None, :], y, u)

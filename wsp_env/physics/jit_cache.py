@@ -25,6 +25,7 @@ KERNEL_SOURCES = (  # every file with compiled kernels, relative to the package
     "core/kernel.py",
     "evaluation/reference.py",
     "rig/roller_rig.py",
+    "calibration/recurrence.py",
     "baselines/oracle.py",  # installed as wsp_env.baselines; ../baselines in a checkout
 )
 STAMP_NAME = "wsp_env_kernels.sha256"
