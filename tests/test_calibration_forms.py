@@ -52,9 +52,9 @@ def test_first_order_holds_its_gain_and_delays_by_its_constant():
 def test_first_order_compiled_pass_is_the_recurrence_bit_for_bit():
     """The compiled pass (``recurrence.lag_pass``) gives the per-sample recurrence of its
     docstring, written out here in plain Python, to the last bit: uneven sampling, a column
-    with a zero time constant, a scalar constant broadcast over the columns."""
+    with a zero time constant, a scalar constant broadcast over the columns, one sample."""
     rng = np.random.default_rng(3)
-    for n, m, tc in ((2, 1, 0.2), (300, 5, None), (1_000, 3, 0.0), (57, 7, 1.5)):
+    for n, m, tc in ((1, 2, 0.2), (2, 1, 0.2), (300, 5, None), (1_000, 3, 0.0), (57, 7, 1.5)):
         t = np.cumsum(rng.uniform(0.005, 0.05, n))
         u = rng.normal(size=(n, m))
         tcs = rng.uniform(0.01, 2.0, m) if tc is None else np.full(m, tc)

@@ -227,8 +227,6 @@ def first_order(t: np.ndarray, u: np.ndarray, tc: np.ndarray) -> np.ndarray:
     dt = np.diff(t)
     a = np.exp(-dt[:, None] / tcs[None, :])  # (samples - 1, columns)
     slope = np.diff(u, axis=0) / dt[:, None]
-    cols = u.reshape(len(u), -1)
-    y = lag_pass(np.ascontiguousarray(cols), np.ascontiguousarray(a.reshape(len(a), -1)),
-                 np.ascontiguousarray(slope.reshape(len(slope), -1)),
-                 np.ascontiguousarray(tcs.reshape(-1))).reshape(u.shape)  # fmt: skip
+    y = lag_pass(np.ascontiguousarray(u), np.ascontiguousarray(a),
+                 np.ascontiguousarray(slope), np.ascontiguousarray(tcs))  # fmt: skip
     return np.where(live[None, :], y, u)
