@@ -55,8 +55,9 @@ def _heldout_firsts(vehicle: str) -> tuple[Any, list[dict]]:
 @pytest.mark.parametrize("name", SHIPPED)
 def test_shipped_policy_beats_the_classical_wsp_on_heldout_firsts(name):
     policy = make_policy(name)
-    suite, classical = _heldout_firsts(policy.vehicle or "uic_z1")  # the vehicle it learned on
-    learned, _ = run_suite(policy.vehicle or "uic_z1", suite, policy, record="none")
+    vehicle = policy.vehicle or "uic_z1"  # the vehicle it learned on
+    suite, classical = _heldout_firsts(vehicle)
+    learned, _ = run_suite(vehicle, suite, policy, record="none")
     assert len(learned) == len(classical) == len(suite.cases) + 1  # soap_mid has two speeds
 
     def mean(rs, key):

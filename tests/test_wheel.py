@@ -218,10 +218,11 @@ def test_every_command_runs_from_a_fresh_install_then_learning_with_rl_and_expor
     # [rl,export] added to the same install: the learning commands run, and every shipped
     # policy loads from the installed package and stops on the evaluation path
     _add_extras(site.venv, tmp, wheel, "[rl,export]")
-    uic = _shipped_by_vehicle()["uic_z1"][0]  # simulate's default vehicle
+    by_vehicle = _shipped_by_vehicle()
+    uic = by_vehicle["uic_z1"][0]  # simulate's default vehicle
     site.ok("simulate", "--policy", uic, "--speed-kmh", "80", "--json", "sim.json")
     assert site.read("sim.json")["policy"] == uic
-    for vehicle, names in _shipped_by_vehicle().items():  # each on the vehicle it was trained for
+    for vehicle, names in by_vehicle.items():  # each on the vehicle it was trained for
         policies = [a for p in ["classical", *names] for a in ("--policy", p)]
         site.ok("evaluate", "--vehicle", vehicle, "--suite", "quick", *policies, "--no-progress",
                 "--json", f"eval_{vehicle}.json")  # fmt: skip

@@ -1,7 +1,7 @@
 """The calibration's one compiled loop: the first-order lag's pass over a log's samples
 (``residuals.first_order``). A recurrence over thousands of samples is a Python loop's worst
-case (one interpreted step a sample: about 15 ms a call on a 60 s log, 1,060 calls in the
-calibration tests); compiled, the same arithmetic in the same order (no fast-math) gives the
+case (one interpreted step a sample: 15-20 ms a call on a 60 s log, 1,060 calls in two of the
+calibration test modules); compiled, the same arithmetic in the same order (no fast-math) gives the
 same numbers bit for bit (``tests/test_calibration_forms.py``)."""
 
 from __future__ import annotations
