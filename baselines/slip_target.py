@@ -47,7 +47,7 @@ what the sensor model measures) — exactly as the classical WSP (``classical.py
   it shortens low targets' stops on leaves and oil by about 1 %, but it works the valves harder
   on soap (the same stops with 73 % more air at 4.25 km/h), and the benchmark's score, which
   counts the air, falls (a student of its teacher: −0.0011 paired, two seeds;
-  ``docs/training.md``, "The slip-target loop's gain scaled by the pressure held");
+  ``docs/training_log.md``, "The slip-target loop's gain scaled by the pressure held");
 * the classical WSP's recovery rule: an axle re-accelerating faster than ``accel_hold_mps2``
   is not vented further (it is on its way back), at most held;
 * a target of at most ``max_creep`` of the reference speed, or the floor (``creep_floor_kmh``,
@@ -63,7 +63,7 @@ what the sensor model measures) — exactly as the classical WSP (``classical.py
   axles slide alike at a low slip, which looks like grip, and the train slows by less than its
   0.2 m/s^2). The floor keeps the cap off the targets of 2 km/h and less, which the learned
   policies ask for on leaves (without it the cap tripped the supervision on three more stops
-  of a learned policy). ``docs/training.md``, "The slip-target loop's creep cap";
+  of a learned policy). ``docs/training_log.md``, "The slip-target loop's creep cap";
 * below ``min_speed_kmh`` the full demand (the classical WSP's rule: the last metres);
 * **periodic release**, as the classical WSP makes it (its ``periodic_release_*`` thresholds,
   ``release_accel_done_mps2``): an axle held at a target slip never rolls freely, so the shared
@@ -100,22 +100,22 @@ what the sensor model measures) — exactly as the classical WSP (``classical.py
   times the time since the anchor from the reference it tracks (never below the fastest wheel): 49
   anchors, 5 of them 2 s after the last, 0.32 m/s^2 learned, 286.0 m
   (``tests/test_slip_target.py``).
-  ``docs/training.md``, "The slip-target loop's drift correction".
+  ``docs/training_log.md``, "The slip-target loop's drift correction".
   With ``onset_drift`` the correction's drift is also read at every stop's start, before any
   anchor: while every cylinder is under its brake's threshold every wheel rolls with the
   train, so the accelerometer's mean reading less the wheels' mean deceleration is its offset
-  (``_read_onset``; ``docs/training.md``, "The onset reading of the accelerometer's offset").
+  (``_read_onset``; ``docs/training_log.md``, "The onset reading of the accelerometer's offset").
   With ``onset_two_sided`` it reads a reading of too much deceleration too (a downhill's
   ``g sin(theta)``, a positive bias: the aided reference sinks below the train, which matters
   when every wheel slides below it), and every drift downward, the onset's or an anchor's,
   raises the tracked reference only for the time no wheel has held the estimator's up
-  (``docs/training.md``, "The onset reading's other sense").
+  (``docs/training_log.md``, "The onset reading's other sense").
 * **the wheel-speed sensors' scales, calibrated** (``scale_calibration``; either tier; off by
   default): in that same window each sensor's mean reading against the wheels' mean is its
   scale error (a wheel diameter known to the BCU only roughly), divided out of every reading
   and of the estimator's reference for the rest of the stop (``_calibrate``): with the
   benchmark's +-0.5 % a 2 km/h target's leaves watchdog stops fall from 7 to 1 of 593 fresh
-  stops (``docs/training.md``, "The wheel-scale calibration").
+  stops (``docs/training_log.md``, "The wheel-scale calibration").
 
 The commands are continuous valve actions (``2 f - 1``), so the loop can drive any continuous
 environment from outside (``SlipTargetPolicy``: a constant target) and gives, bit for bit, the

@@ -1,6 +1,6 @@
 """Time one fine-tune generation's evaluation: 14 members (the start twice and six antithetic
 pairs, sigma 0.01) on 100 fixed stops of a pool, through whichever ``wsp_env`` is first on
-``sys.path``, so two versions of the code can be timed on the same work (docs/training.md,
+``sys.path``, so two versions of the code can be timed on the same work (docs/training_log.md,
 "The second run"). Prints the wall time and the returns' sum (equal sums: the same results).
 
     .venv/bin/python scripts/es_generation_timing.py runs/train/bc_st_s1/student.zip \\

@@ -2,7 +2,7 @@
 stop: its bias less g times the gradient (a specific-force sensor reads the gradient's
 ``g sin(theta)`` as well; ``wsp_env.core.sensors``), in m/s^2. A negative offset reads less
 deceleration than the train makes, so the aided reference speed runs above the train
-(docs/training.md, "The third run"). Leaves stops are left out (their tails come from the
+(docs/training_log.md, "The third run"). Leaves stops are left out (their tails come from the
 rail, not the reference). Reads ``wsp-env benchmark --json``; ``--json F`` writes the rows.
 
     .venv/bin/python scripts/stops_by_offset.py runs/s9/sealed_es.json bc_st_s1/student

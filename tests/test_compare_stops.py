@@ -1,5 +1,5 @@
 """scripts/compare_stops.py: two policies stop by stop (the per-stop comparison of
-docs/training.md)."""
+docs/training_log.md)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""scripts/learning_curves.py: the pure-RL learning-curve figure of docs/training.md, read from
+"""scripts/learning_curves.py: the pure-RL learning-curve figure of docs/training_log.md, read from
 the runs' ``curve.json``."""
 
 from __future__ import annotations

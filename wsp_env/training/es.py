@@ -2,7 +2,7 @@
 (``wsp-env finetune``; docs/training.md, "Fine-tuning on the score").
 
 **Why not PPO here.** PPO from an imitation start moved the slip-target student off its start on
-most stops (docs/training.md, "The fine-tune against its imitation start"): its objective, the
+most stops (docs/training_log.md, "The fine-tune against its imitation start"): its objective, the
 mean discounted return, is carried by a few stops 10-20 times the median, not the score (the
 interquartile mean of each stop's return normalised between locked wheels and the classical
 WSP); and a better target at one 80 ms decision changes a stop's return by far less than stops
@@ -82,7 +82,7 @@ HISTORY = "history.json"
 
 @dataclass(frozen=True)
 class ESSettings:
-    """A fine-tune's settings (``es.json``; docs/training.md's first run changed only
+    """A fine-tune's settings (``es.json``; docs/training_log.md's first run changed only
     ``learning_rate``, to 0.003; its second also ``average`` to 0.9 and ``guard`` to 0.2).
 
     ============================  =======  ==================================================

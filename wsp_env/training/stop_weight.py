@@ -5,7 +5,7 @@ of per-stop *normalised* returns, ``s = (R - R_none) / G`` with ``G`` the classi
 that stop (``evaluation.benchmark``). A stop's return is its cost in metres / 100, so a 10 km
 leaves stop down a gradient weighs in the mean as much as a hundred 100 m stops, and a fine-tune
 that gains a few metres there while most stops get worse raises the mean return and lowers the
-score (docs/training.md, "The fine-tune against its imitation start"). Maximising the mean of
+score (docs/training_log.md, "The fine-tune against its imitation start"). Maximising the mean of
 ``R / G`` instead is maximising the mean of ``s`` (``R_none / G`` is a constant of the stop).
 
 **The weight.** ``G`` is not known while training (it takes a classical and a locked-wheel run
