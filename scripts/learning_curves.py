@@ -1,9 +1,9 @@
 """The pure-RL learning curves (issue 23 item 5): each training run's fixed-seed curve
 (``curve.json``: the current policy, deterministic, on the same first ``curve_runs`` stops of
-the ``validation`` suite every ``curve_every_timesteps``; docs/training_log.md) as the benchmark's
-score against the steps trained, one panel per group of runs (an algorithm and its options over
-its seeds: the seeds' mean, their range shaded; each panel its own scale), beside the classical
-WSP (1) and the group's score at step 0.
+the ``validation`` suite every ``curve_every_timesteps``; docs/training.md, "The run") as the
+benchmark's score against the steps trained, one panel per group of runs (an algorithm and its
+options over its seeds: the seeds' mean, their range shaded; each panel its own scale), beside
+the classical WSP (1) and the group's score at step 0.
 
     .venv/bin/python scripts/learning_curves.py \\
         --group "PPO, valve fractions=runs/train/repeat4_s0,runs/train/repeat4_s1" \\

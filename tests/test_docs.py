@@ -106,6 +106,9 @@ def test_every_section_cited_by_name_is_in_the_file_cited() -> None:
         ("Results on `heldout`", "results-on-heldout"),
         ("The one-target family's room, probed (2026-11-28)",
          "the-one-target-familys-room-probed-2026-11-28"),
+        ("The Régiolis under the cap", "the-régiolis-under-the-cap"),
+        ("What a registered id fixes (`wsp_env/envs/tiers.py`)",
+         "what-a-registered-id-fixes-wsp_envenvstierspy"),
     ],
 )  # fmt: skip
 def test_anchors_are_githubs(heading: str, anchor: str) -> None:
