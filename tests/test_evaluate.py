@@ -252,3 +252,24 @@ def test_references_of_a_repeated_run_are_its_own_alone():
     alone = refs([a]) + refs([b])
     assert alone[0] != alone[1]
     assert refs([a, b, a, b, a]) == [alone[0], alone[1], alone[0], alone[1], alone[0]]
+
+
+def test_references_kept_for_another_policy_are_the_ones_computed_again():
+    """A stop's references (the available-adhesion and dry-rail distances) are kept for the
+    process by the inputs that make them: another policy on the same stops finds every one
+    kept, and what it reports is bit for bit what computing them again gives."""
+    from wsp_env.evaluation import runner
+
+    suite = dataclasses.replace(load_suite("quick"), seeds=(0,))
+    suite = dataclasses.replace(suite, cases=suite.cases[:3])
+    runner.clear_reference_cache()
+    first, _ = run_suite("uic_z1", suite, make_policy("none"), record="none")
+    kept = runner.reference_cache_size()
+    assert kept == (len(first), 1)
+    reused, _ = run_suite("uic_z1", suite, make_policy("classical"), record="none")
+    assert runner.reference_cache_size() == kept  # every one found, none added
+    runner.clear_reference_cache()
+    again, _ = run_suite("uic_z1", suite, make_policy("classical"), record="none")
+    assert json.dumps(reused, sort_keys=True) == json.dumps(again, sort_keys=True)
+    for r in reused:
+        assert r["reference_distance_m"] > 0 and r["dry_reference_distance_m"] > 0
