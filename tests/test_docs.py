@@ -6,6 +6,7 @@ Moving a section between files without following its references fails here."""
 
 from __future__ import annotations
 
+import functools
 import re
 import sys
 from pathlib import Path
@@ -34,8 +35,10 @@ def _plain(text: str) -> str:
     return re.sub(r"[`*]", "", text).strip()
 
 
+@functools.cache
 def sections(path: Path) -> tuple[set[str], list[str]]:
-    """A Markdown file's anchors and its section names (headings and bold paragraph leads)."""
+    """A Markdown file's anchors and its section names (headings and bold paragraph leads),
+    read once a file (the citations ask for the same few files many times)."""
     text = path.read_text(encoding="utf-8")
     text = re.sub(r"^```.*?^```", "", text, flags=re.M | re.S)  # code blocks hold no headings
     headings = HEADING.findall(text)
