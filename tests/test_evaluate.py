@@ -273,3 +273,44 @@ def test_references_kept_for_another_policy_are_the_ones_computed_again():
     assert json.dumps(reused, sort_keys=True) == json.dumps(again, sort_keys=True)
     for r in reused:
         assert r["reference_distance_m"] > 0 and r["dry_reference_distance_m"] > 0
+
+
+def test_a_reference_key_changes_with_each_input_it_hashes():
+    """A key that left out an input would hand one stop's reference to another: change one
+    input at a time and only the references that read it are computed again, each equal to a
+    computation from a cold cache. The run's time limit reaches only the dry-rail run; one case's
+    initial speed only its own available-adhesion reference (and the batch's dry run, whose
+    setups carry it). A kept dry array cannot be written through."""
+    from wsp_env.evaluation import runner
+
+    suite = dataclasses.replace(load_suite("quick"), seeds=(0,))
+    suite = dataclasses.replace(suite, cases=suite.cases[:2])
+    runner.clear_reference_cache()
+    first, _ = run_suite("uic_z1", suite, make_policy("none"), record="none")
+    assert runner.reference_cache_size() == (2, 1)
+    assert all(not a.flags.writeable for a in runner._dry_cache.values())
+
+    def cold(s, max_time_s=600.0):
+        kept = (dict(runner._available_cache), dict(runner._dry_cache))
+        runner.clear_reference_cache()
+        try:
+            return run_suite("uic_z1", s, make_policy("none"), record="none",
+                             max_time_s=max_time_s)[0]  # fmt: skip
+        finally:
+            runner.clear_reference_cache()
+            runner._available_cache.update(kept[0])
+            runner._dry_cache.update(kept[1])
+
+    def refs(res):
+        return [(r["reference_distance_m"], r["dry_reference_distance_m"]) for r in res]
+
+    shorter, _ = run_suite("uic_z1", suite, make_policy("none"), record="none", max_time_s=300.0)
+    assert runner.reference_cache_size() == (2, 2)  # a new dry run, the same available ones
+    assert refs(shorter) == refs(cold(suite, 300.0))
+    case = suite.cases[0]
+    faster = dataclasses.replace(case, speeds_kmh=(str(float(case.speeds_kmh[0]) + 7.0),))
+    moved = dataclasses.replace(suite, cases=(faster, *suite.cases[1:]))
+    res, _ = run_suite("uic_z1", moved, make_policy("none"), record="none")
+    assert runner.reference_cache_size() == (3, 3)  # that case's available one, a dry run
+    assert refs(res) == refs(cold(moved))
+    assert refs(res)[0] != refs(first)[0] and refs(res)[1:] == refs(first)[1:]

@@ -269,6 +269,7 @@ def _references(
     dry_m = None if dry_key is None else _dry_cache.get(dry_key)
     if dry_m is None:
         dry_m = dry_reference_distances(core.vehicle, setups, dry_rail, *steps)
+        dry_m.setflags(write=False)  # kept and shared: no caller may write through it
     if dry_key is not None:
         _remember(_dry_cache, dry_key, dry_m, DRY_CACHE_SIZE)
     dry = dict(zip(distinct, dry_m, strict=True))
