@@ -278,9 +278,9 @@ def test_references_kept_for_another_policy_are_the_ones_computed_again():
 def test_a_reference_key_changes_with_each_input_it_hashes():
     """A key that left out an input would hand one stop's reference to another: change one
     input at a time and only the references that read it are computed again, each equal to a
-    computation from a cold cache. The run's time limit reaches only the dry-rail run; one case's
-    initial speed only its own available-adhesion reference (and the batch's dry run, whose
-    setups carry it). A kept dry array cannot be written through."""
+    computation from a cold cache. The run's time limit reaches only the dry-rail run (20 s cuts
+    its stops short); one case's initial speed only its own available-adhesion reference (and
+    the batch's dry run, whose setups carry it). A kept dry array cannot be written through."""
     from wsp_env.evaluation import runner
 
     suite = dataclasses.replace(load_suite("quick"), seeds=(0,))
@@ -304,13 +304,19 @@ def test_a_reference_key_changes_with_each_input_it_hashes():
     def refs(res):
         return [(r["reference_distance_m"], r["dry_reference_distance_m"]) for r in res]
 
-    shorter, _ = run_suite("uic_z1", suite, make_policy("none"), record="none", max_time_s=300.0)
+    # 20 s cuts the dry stops short, so a dry key without the time limit would return the
+    # first run's (longer) distances
+    shorter, _ = run_suite("uic_z1", suite, make_policy("none"), record="none", max_time_s=20.0)
     assert runner.reference_cache_size() == (2, 2)  # a new dry run, the same available ones
-    assert refs(shorter) == refs(cold(suite, 300.0))
+    assert refs(shorter) == refs(cold(suite, 20.0))
+    assert [r[1] for r in refs(shorter)] != [r[1] for r in refs(first)]
     case = suite.cases[0]
+    assert case.pattern == "uniform"  # rail sections that do not move with the speed: the
+    # available key then changes through v0 alone
     faster = dataclasses.replace(case, speeds_kmh=(str(float(case.speeds_kmh[0]) + 7.0),))
     moved = dataclasses.replace(suite, cases=(faster, *suite.cases[1:]))
     res, _ = run_suite("uic_z1", moved, make_policy("none"), record="none")
     assert runner.reference_cache_size() == (3, 3)  # that case's available one, a dry run
     assert refs(res) == refs(cold(moved))
     assert refs(res)[0] != refs(first)[0] and refs(res)[1:] == refs(first)[1:]
+    runner.clear_reference_cache()
