@@ -280,43 +280,36 @@ def test_a_reference_key_changes_with_each_input_it_hashes():
     input at a time and only the references that read it are computed again, each equal to a
     computation from a cold cache. The run's time limit reaches only the dry-rail run (20 s cuts
     its stops short); one case's initial speed only its own available-adhesion reference (and
-    the batch's dry run, whose setups carry it). A kept dry array cannot be written through."""
+    the batch's dry run, whose setups carry it)."""
     from wsp_env.evaluation import runner
 
     suite = dataclasses.replace(load_suite("quick"), seeds=(0,))
     suite = dataclasses.replace(suite, cases=suite.cases[:2])
-    runner.clear_reference_cache()
-    first, _ = run_suite("uic_z1", suite, make_policy("none"), record="none")
-    assert runner.reference_cache_size() == (2, 1)
-    assert all(not a.flags.writeable for a in runner._dry_cache.values())
-
-    def cold(s, max_time_s=600.0):
-        kept = (dict(runner._available_cache), dict(runner._dry_cache))
-        runner.clear_reference_cache()
-        try:
-            return run_suite("uic_z1", s, make_policy("none"), record="none",
-                             max_time_s=max_time_s)[0]  # fmt: skip
-        finally:
-            runner.clear_reference_cache()
-            runner._available_cache.update(kept[0])
-            runner._dry_cache.update(kept[1])
-
-    def refs(res):
-        return [(r["reference_distance_m"], r["dry_reference_distance_m"]) for r in res]
-
-    # 20 s cuts the dry stops short, so a dry key without the time limit would return the
-    # first run's (longer) distances
-    shorter, _ = run_suite("uic_z1", suite, make_policy("none"), record="none", max_time_s=20.0)
-    assert runner.reference_cache_size() == (2, 2)  # a new dry run, the same available ones
-    assert refs(shorter) == refs(cold(suite, 20.0))
-    assert [r[1] for r in refs(shorter)] != [r[1] for r in refs(first)]
     case = suite.cases[0]
     assert case.pattern == "uniform"  # rail sections that do not move with the speed: the
     # available key then changes through v0 alone
     faster = dataclasses.replace(case, speeds_kmh=(str(float(case.speeds_kmh[0]) + 7.0),))
     moved = dataclasses.replace(suite, cases=(faster, *suite.cases[1:]))
-    res, _ = run_suite("uic_z1", moved, make_policy("none"), record="none")
+
+    def refs(s, max_time_s=600.0):
+        res, _ = run_suite("uic_z1", s, make_policy("none"), record="none", max_time_s=max_time_s)
+        return [(r["reference_distance_m"], r["dry_reference_distance_m"]) for r in res]
+
+    cold = {}
+    for name, s, limit in (("short", suite, 20.0), ("moved", moved, 600.0)):
+        runner.clear_reference_cache()
+        cold[name] = refs(s, limit)
+    runner.clear_reference_cache()
+    first = refs(suite)
+    assert runner.reference_cache_size() == (2, 1)
+    # 20 s cuts the dry stops short, so a dry key without the time limit would return the
+    # first run's (longer) distances
+    shorter = refs(suite, 20.0)
+    assert runner.reference_cache_size() == (2, 2)  # a new dry run, the same available ones
+    assert shorter == cold["short"]
+    assert [r[1] for r in shorter] != [r[1] for r in first]
+    res = refs(moved)
     assert runner.reference_cache_size() == (3, 3)  # that case's available one, a dry run
-    assert refs(res) == refs(cold(moved))
-    assert refs(res)[0] != refs(first)[0] and refs(res)[1:] == refs(first)[1:]
+    assert res == cold["moved"]
+    assert res[0] != first[0] and res[1:] == first[1:]
     runner.clear_reference_cache()
