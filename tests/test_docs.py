@@ -36,14 +36,14 @@ def _plain(text: str) -> str:
 
 
 @functools.cache
-def sections(path: Path) -> tuple[set[str], list[str]]:
+def sections(path: Path) -> tuple[frozenset[str], tuple[str, ...]]:
     """A Markdown file's anchors and its section names (headings and bold paragraph leads),
-    read once a file (the citations ask for the same few files many times)."""
+    read once a file (the citations ask for the same few files many times; kept, so frozen)."""
     text = path.read_text(encoding="utf-8")
     text = re.sub(r"^```.*?^```", "", text, flags=re.M | re.S)  # code blocks hold no headings
     headings = HEADING.findall(text)
     names = [_plain(h) for h in headings] + [_plain(b) for b in BOLD_LEAD.findall(text)]
-    return {slug(h) for h in headings}, names
+    return frozenset(slug(h) for h in headings), tuple(names)
 
 
 def _doc(name: str) -> Path | None:
