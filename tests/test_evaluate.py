@@ -286,8 +286,8 @@ def test_a_reference_key_changes_with_each_input_it_hashes():
     suite = dataclasses.replace(load_suite("quick"), seeds=(0,))
     suite = dataclasses.replace(suite, cases=suite.cases[:2])
     case = suite.cases[0]
-    assert case.pattern == "uniform"  # rail sections that do not move with the speed: the
-    # available key then changes through v0 alone
+    # rail sections that do not move with the speed: the available key changes through v0 alone
+    assert case.pattern == "uniform"
     faster = dataclasses.replace(case, speeds_kmh=(str(float(case.speeds_kmh[0]) + 7.0),))
     moved = dataclasses.replace(suite, cases=(faster, *suite.cases[1:]))
 

@@ -207,7 +207,7 @@ def run_runs(
 REFERENCE_CACHE_SIZE = 65_536  # available-adhesion references kept (a float and a hash each)
 DRY_CACHE_SIZE = 64  # batches of dry-rail references kept
 _available_cache: OrderedDict[bytes, float] = OrderedDict()
-_dry_cache: OrderedDict[bytes, np.ndarray] = OrderedDict()
+_dry_cache: OrderedDict[bytes, tuple[float, ...]] = OrderedDict()  # tuples: none can be written
 
 
 def _remember(cache: OrderedDict, key: bytes, value: Any, size: int) -> None:
@@ -268,8 +268,7 @@ def _references(
         dry_key = None
     dry_m = None if dry_key is None else _dry_cache.get(dry_key)
     if dry_m is None:
-        dry_m = dry_reference_distances(core.vehicle, setups, dry_rail, *steps)
-        dry_m.setflags(write=False)  # kept and shared: no caller may write through it
+        dry_m = tuple(dry_reference_distances(core.vehicle, setups, dry_rail, *steps).tolist())
     if dry_key is not None:
         _remember(_dry_cache, dry_key, dry_m, DRY_CACHE_SIZE)
     dry = dict(zip(distinct, dry_m, strict=True))
