@@ -48,9 +48,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numba import njit
 
 from wsp_env.core import kernel as K
 from wsp_env.core.config import ConfigError, configs_root, from_dict, read_yaml
+from wsp_env.physics.integrator import INLINE_FLAGS, KERNEL_FLAGS
 from wsp_env.physics.layout import EP_P_MAX
 
 VENT, HOLD, APPLY = 0, 1, 2
@@ -125,16 +127,84 @@ class ArrayState:
             setattr(self, k, v.copy())
 
 
+# ---- compiled: one definition of each rule, IEEE arithmetic as numpy's (``KERNEL_FLAGS``) ----
+# Each env's step is a short run of scalar comparisons; as numpy array operations on a batch of
+# one it cost ~110 us a period in interpreter overhead (a single stop, a trace, a calibration).
+# The same floating-point operations in the same order, so the results are bit for bit those
+# of the array version they replaced (2026-12-07; the quick suite, the benchmark and
+# ``validate`` gave identical JSON).
+
+# the release's thresholds in ``release_par`` (``PeriodicRelease._release_par``)
+RP_INTERVAL, RP_DURATION, RP_ACCEL_DONE, RP_MAX = 0, 1, 2, 3
+# the classical WSP's thresholds in ``wsp_par`` (``ClassicalWSP._wsp_par``)
+(WP_SLIP_ABS, WP_SLIP_REL, WP_RELEASE_RATIO, WP_DECEL_VENT, WP_ACCEL_HOLD, WP_FAST_FRACTION,
+ WP_FILL, WP_HOLD, WP_SAFETY, WP_MIN_SPEED) = range(10)  # fmt: skip
+
+
+@njit(**INLINE_FLAGS)
+def _np_maximum(a: float, b: float) -> float:
+    """``np.maximum`` of two floats: NaN if either is (numpy's rule, not Python's ``max``)."""
+    return a if (a >= b or a != a) else b
+
+
+@njit(**INLINE_FLAGS)
+def release_env(
+    i, age, decel_row, dt, allowed, since, left, elapsed, releasing, axle, next_axle, par
+):  # fmt: skip
+    """The periodic release of env ``i`` over one period (``PeriodicRelease``): ``age`` its
+    reference's age (s), ``decel_row`` its axles' decelerations (m/s^2), ``allowed`` whether a
+    release may begin; updates the env's release state in place and returns the axle to vent
+    this period, or -1."""
+    na = decel_row.shape[0]
+    since[i] += dt
+    interval = par[RP_INTERVAL]
+    if age > interval and since[i] > interval and not releasing[i] and allowed:
+        axle[i] = next_axle[i]
+        next_axle[i] = (next_axle[i] - 1) % na
+        left[i] = par[RP_DURATION]
+        elapsed[i] = 0.0
+        releasing[i] = True
+        since[i] = 0.0
+    if not releasing[i]:
+        return -1
+    a = axle[i]
+    # at least the minimum time, then until the wheel has stopped spinning up and the
+    # estimator has anchored on it (the observed age fell below the release's time)
+    still = left[i] > 0 or -decel_row[a] > par[RP_ACCEL_DONE] or age >= elapsed[i]
+    still = still and elapsed[i] < par[RP_MAX]
+    left[i] -= dt
+    elapsed[i] += dt
+    if not still:
+        releasing[i] = False
+        return -1
+    return a
+
+
+@njit(**KERNEL_FLAGS)
+def release_step(
+    age, decel, dt, allowed, since, left, elapsed, releasing, axle, next_axle, par, vent
+):  # fmt: skip
+    """``release_env`` for every env: marks in ``vent`` ``(n_envs, n_axles)`` the axles to
+    vent this period (``allowed``: per env)."""
+    for i in range(age.shape[0]):
+        a = release_env(
+            i, age[i], decel[i], dt, allowed[i], since, left, elapsed, releasing, axle,
+            next_axle, par,
+        )  # fmt: skip
+        if a >= 0:
+            vent[i, a] = True
+
+
 class PeriodicRelease:
     """The periodic release (module docstring) as state of a batched controller: when the
     reference has gone ``periodic_release_interval_s`` without an anchor, and as long since the
     last release began, one axle in turn from the last is released for at least
     ``periodic_release_duration_s`` and on until it stops spinning up and the estimator has
     anchored on it, at most ``periodic_release_max_s``. Shared by the classical WSP and the
-    slip-target loop (``slip_target``); needs ``cfg`` (``WSPConfig``) and ``_rows``."""
+    slip-target loop (``slip_target``); needs ``cfg`` (``WSPConfig``). The rule itself is the
+    compiled ``release_env``."""
 
     cfg: WSPConfig
-    _rows: np.ndarray
 
     def _release_init(self, n: int, next_axle: int = 0) -> None:
         self.since_release = np.zeros(n)  # s since the last periodic release began
@@ -151,44 +221,124 @@ class PeriodicRelease:
         self.releasing[env_ids] = False
         self.next_release[env_ids] = n_axles - 1  # the last axle first
 
+    def _release_par(self) -> np.ndarray:
+        """The release's thresholds from ``cfg`` as the kernels read them (``RP_``)."""
+        cfg = self.cfg
+        return np.array(
+            [cfg.periodic_release_interval_s, cfg.periodic_release_duration_s,
+             cfg.release_accel_done_mps2, cfg.periodic_release_max_s], dtype=np.float64,
+        )  # fmt: skip
+
+    def _release_state(self) -> tuple[np.ndarray, ...]:
+        """The release's state arrays in ``release_env``'s order (updated in place)."""
+        return (self.since_release, self.release_left, self.release_time, self.releasing,
+                self.release_axle, self.next_release)  # fmt: skip
+
     def _release_step(
-        self, age: np.ndarray, decel: np.ndarray, dt: float, allowed: np.ndarray | None = None
-    ) -> tuple[np.ndarray, np.ndarray]:
+        self, age: np.ndarray, decel: np.ndarray, dt: float, allowed: np.ndarray, vent: np.ndarray
+    ) -> None:
         """Advance the release by one period (``age``: the reference's, s, per env; ``decel``:
-        per axle, m/s^2; ``allowed``: envs where a release may begin); returns the (env, axle)
-        pairs to vent this period."""
-        cfg, na = self.cfg, decel.shape[1]
-        self.since_release += dt
-        start = (
-            (age > cfg.periodic_release_interval_s)
-            & (self.since_release > cfg.periodic_release_interval_s)
-            & ~self.releasing
-        )
-        if allowed is not None:
-            start &= allowed
-        if start.any():
-            self.release_axle[start] = self.next_release[start]
-            self.next_release[start] = (self.next_release[start] - 1) % na
-            self.release_left[start] = cfg.periodic_release_duration_s
-            self.release_time[start] = 0.0
-            self.releasing |= start
-            self.since_release[start] = 0.0
-        if not self.releasing.any():
-            return self._rows[:0], self._rows[:0]
-        rows = self._rows[self.releasing]
-        axle = self.release_axle[self.releasing]
-        # at least the minimum time, then until the wheel has stopped spinning up and the
-        # estimator has anchored on it (the observed age fell below the release's time)
-        still = (
-            (self.release_left[self.releasing] > 0)
-            | (-decel[rows, axle] > cfg.release_accel_done_mps2)
-            | (age[rows] >= self.release_time[self.releasing])
-        )
-        still &= self.release_time[self.releasing] < cfg.periodic_release_max_s
-        self.release_left[rows] -= dt
-        self.release_time[rows] += dt
-        self.releasing[rows[~still]] = False
-        return rows[still], axle[still]
+        per axle, m/s^2; ``allowed``: envs where a release may begin); marks the axles to vent
+        this period in ``vent`` (bool, per axle)."""
+        release_step(
+            np.ascontiguousarray(age, dtype=np.float64),
+            np.ascontiguousarray(decel, dtype=np.float64), float(dt),
+            np.ascontiguousarray(allowed, dtype=np.bool_), *self._release_state(),
+            self._release_par(), vent,
+        )  # fmt: skip
+
+
+@njit(**KERNEL_FLAGS)
+def classical_act(
+    obs, scales, age_index, valve_starts, par, release_par, dt, venting_for, locked_out,
+    stepping, step_clock, slide_pressure, active, since, left, elapsed, releasing, axle,
+    next_axle, action,
+):  # fmt: skip
+    """One period of the classical WSP (module docstring) for every env: reads the kernel's
+    observation ``obs`` (``scales``: speed, deceleration and age scales), updates the state
+    arrays in place and writes the valve actions into ``action`` ``(n_envs, n_valves)``."""
+    n, na = obs.shape[0], venting_for.shape[1]
+    nv = valve_starts.shape[0]
+    v_scale, a_scale, age_scale = scales[0], scales[1], scales[2]
+    slip_abs = par[WP_SLIP_ABS] / 3.6
+    min_speed = par[WP_MIN_SPEED] / 3.6
+    pulse = par[WP_FILL] + par[WP_HOLD]
+    state = np.empty(na, dtype=np.int64)
+    decel = np.empty(na)
+    for i in range(n):
+        demand = np.float64(obs[i, 4 * na])  # / p_max
+        # 1. the shared reference speed and its age (module docstring)
+        v_ref = np.float64(obs[i, 4 * na + 1]) * v_scale
+        age = np.float64(obs[i, age_index]) * age_scale
+        # 2. slide detection; 3. discrete state control
+        working = False
+        for j in range(na):
+            v = np.float64(obs[i, j]) * v_scale
+            decel[j] = np.float64(obs[i, na + j]) * a_scale
+            slip = v_ref - v
+            threshold = _np_maximum(slip_abs, par[WP_SLIP_REL] * v_ref)
+            sliding = slip > threshold or decel[j] > par[WP_DECEL_VENT]
+            recovering = -decel[j] > par[WP_ACCEL_HOLD]
+            s = APPLY
+            if slip > par[WP_RELEASE_RATIO] * threshold:
+                s = HOLD
+            if sliding and not recovering:
+                s = VENT
+            state[j] = s
+            working = working or s != APPLY
+        # periodic release: while the WSP works and the reference has gone long without an
+        # anchor, release one axle now and then so that it spins up to the train speed and the
+        # estimator anchors on it
+        active[i] = working
+        a = release_env(
+            i, age, decel, dt, working, since, left, elapsed, releasing, axle, next_axle,
+            release_par,
+        )  # fmt: skip
+        if a >= 0:
+            state[a] = VENT
+        for j in range(na):
+            pressure = np.float64(obs[i, 3 * na + j])  # / p_max
+            # re-application after a vent: straight back to a share of the pressure the slide
+            # began at, then fill pulses separated by holds
+            if state[j] == VENT:
+                if venting_for[i, j] == 0.0:  # a vent begins this period
+                    slide_pressure[i, j] = pressure
+                stepping[i, j] = True
+            stepping[i, j] = stepping[i, j] and pressure < demand - 0.02
+            fast = pressure < par[WP_FAST_FRACTION] * slide_pressure[i, j]
+            if stepping[i, j] and state[j] == APPLY and not fast:
+                step_clock[i, j] = step_clock[i, j] + dt
+                if np.mod(step_clock[i, j] - dt, pulse) >= par[WP_FILL]:
+                    state[j] = HOLD
+            else:
+                step_clock[i, j] = 0.0
+            # safety timer: continuous venting beyond the limit restores braking until standstill
+            venting_for[i, j] = venting_for[i, j] + dt if state[j] == VENT else 0.0
+            if venting_for[i, j] > par[WP_SAFETY]:
+                locked_out[i, j] = True
+            if locked_out[i, j] or v_ref < min_speed:
+                state[j] = APPLY
+        # valves: the most cautious state of their axles; hold = keep the current pressure
+        for k in range(nv):
+            lo = valve_starts[k]
+            hi = valve_starts[k + 1] if k + 1 < nv else na
+            valve_state = state[lo]
+            valve_p = np.float64(obs[i, 3 * na + lo])
+            for j in range(lo + 1, hi):
+                valve_state = min(valve_state, state[j])
+                valve_p = _np_maximum(valve_p, np.float64(obs[i, 3 * na + j]))
+            if valve_state == APPLY:
+                u = 1.0
+            elif valve_state == VENT:
+                u = -1.0
+            else:
+                hold_frac = valve_p / _np_maximum(demand, 1e-6) if demand > 1e-6 else 1.0
+                u = 2.0 * hold_frac - 1.0
+            if u < -1.0:
+                u = -1.0
+            elif u > 1.0:
+                u = 1.0
+            action[i, k] = np.float32(u)
 
 
 class ClassicalWSP(ArrayState, PeriodicRelease):
@@ -226,7 +376,7 @@ class ClassicalWSP(ArrayState, PeriodicRelease):
         self.slide_pressure = np.zeros((n, na))  # / p_max, when the last vent began
         self.active = np.zeros(n, dtype=bool)  # some axle out of apply in the last period
         self._release_init(n)
-        self._rows = np.arange(n)
+        self._scales = np.array([self.v_scale, self.a_scale, self.age_scale], dtype=np.float64)
 
     def reset(self, env_ids: np.ndarray) -> None:
         self.venting_for[env_ids] = 0.0
@@ -238,55 +388,26 @@ class ClassicalWSP(ArrayState, PeriodicRelease):
         self._release_reset(env_ids, self.n_axles)
 
     # bound once (``bind``); everything else that is an array evolves (``state_dict``)
-    _CONSTANT = frozenset({"p_max", "valve_of_axle", "valve_starts", "_rows"})
+    _CONSTANT = frozenset({"p_max", "valve_of_axle", "valve_starts", "_scales"})
+
+    def _wsp_par(self) -> np.ndarray:
+        """The thresholds from ``cfg`` as ``classical_act`` reads them (``WP_``)."""
+        cfg = self.cfg
+        return np.array(
+            [cfg.slip_abs_kmh, cfg.slip_rel, cfg.release_ratio, cfg.decel_vent_mps2,
+             cfg.accel_hold_mps2, cfg.reapply_fast_fraction, cfg.reapply_fill_s,
+             cfg.reapply_hold_s, cfg.safety_timer_s, cfg.min_speed_kmh], dtype=np.float64,
+        )  # fmt: skip
 
     def act(self, obs: np.ndarray) -> np.ndarray:
-        cfg, na, dt = self.cfg, self.n_axles, self.dt
-        v = obs[:, :na].astype(np.float64) * self.v_scale
-        decel = obs[:, na : 2 * na].astype(np.float64) * self.a_scale
-        pressure = obs[:, 3 * na : 4 * na].astype(np.float64)  # / p_max
-        demand = obs[:, 4 * na].astype(np.float64)  # / p_max
-        # 1. the shared reference speed and its age (module docstring)
-        v_ref = obs[:, 4 * na + 1].astype(np.float64)[:, None] * self.v_scale
-        age = obs[:, self.age_index].astype(np.float64) * self.age_scale
-        # 2. slide detection
-        slip = v_ref - v
-        threshold = np.maximum(cfg.slip_abs_kmh / 3.6, cfg.slip_rel * v_ref)
-        sliding = (slip > threshold) | (decel > cfg.decel_vent_mps2)
-        recovering = -decel > cfg.accel_hold_mps2
-        # 3. discrete state control
-        state = np.full(v.shape, APPLY, dtype=np.int64)
-        state[slip > cfg.release_ratio * threshold] = HOLD
-        state[sliding & ~recovering] = VENT
-        # periodic release: while the WSP works and the reference has gone long without an
-        # anchor, release one axle now and then so that it spins up to the train speed and the
-        # estimator anchors on it
-        self.active = (state != APPLY).any(axis=1)
-        rows, axles = self._release_step(age, decel, dt, self.active)
-        state[rows, axles] = VENT
-        # re-application after a vent: straight back to a share of the pressure the slide began
-        # at, then fill pulses separated by holds
-        onset = (state == VENT) & (self.venting_for == 0.0)  # a vent begins this period
-        self.slide_pressure = np.where(onset, pressure, self.slide_pressure)
-        self.stepping |= state == VENT
-        self.stepping &= pressure < demand[:, None] - 0.02
-        pulse = cfg.reapply_fill_s + cfg.reapply_hold_s
-        fast = pressure < cfg.reapply_fast_fraction * self.slide_pressure
-        in_step = self.stepping & (state == APPLY) & ~fast
-        self.step_clock = np.where(in_step, self.step_clock + dt, 0.0)
-        state[in_step & (np.mod(self.step_clock - dt, pulse) >= cfg.reapply_fill_s)] = HOLD
-        # safety timer: continuous venting beyond the limit restores braking until standstill
-        self.venting_for = np.where(state == VENT, self.venting_for + dt, 0.0)
-        self.locked_out |= self.venting_for > cfg.safety_timer_s
-        state[self.locked_out] = APPLY
-        state[v_ref[:, 0] < cfg.min_speed_kmh / 3.6] = APPLY
-        # valves: the most cautious state of their axles; hold = keep the current pressure
-        valve_state = np.minimum.reduceat(state, self.valve_starts, axis=1)
-        valve_p = np.maximum.reduceat(pressure, self.valve_starts, axis=1)
-        hold_frac = np.where(
-            demand[:, None] > 1e-6, valve_p / np.maximum(demand[:, None], 1e-6), 1.0
-        )
-        action = np.where(
-            valve_state == APPLY, 1.0, np.where(valve_state == VENT, -1.0, 2.0 * hold_frac - 1.0)
-        )
-        return np.clip(action, -1.0, 1.0).astype(np.float32)
+        """Valve actions ``(n_envs, n_valves)`` (float32 in [-1, 1]) for the kernel's
+        observation ``obs``; advances the state by one period (the compiled ``classical_act``)."""
+        obs = np.asarray(obs)
+        action = np.empty((obs.shape[0], self.n_valves), dtype=np.float32)
+        classical_act(
+            obs, self._scales, self.age_index, self.valve_starts, self._wsp_par(),
+            self._release_par(), float(self.dt), self.venting_for, self.locked_out,
+            self.stepping, self.step_clock, self.slide_pressure, self.active,
+            *self._release_state(), action,
+        )  # fmt: skip
+        return action

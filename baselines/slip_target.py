@@ -347,6 +347,7 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         # some axle's request under the full demand in the last period (``command``): the loop
         # works, and a periodic release may begin (``release="working"``)
         self.working = np.zeros(n, dtype=bool)
+        self.always = np.ones(n, dtype=bool)  # a release may begin anywhere (``release="always"``)
         # the reference's deceleration over the last period (m/s^2; NaN: no period yet), its
         # speed and age then (the lead's relative term, ``advance``)
         self.ref_limit = float(core.obs_par[K.OP_REF_DECEL_LIMIT])
@@ -444,7 +445,7 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         self.kernel_wheels[env_ids] = 0.0
 
     # bound once (``bind``); every other array evolves (``state_dict``)
-    _CONSTANT = frozenset({"valve_of_axle", "valve_starts", "_rows", "free_share"})
+    _CONSTANT = frozenset({"valve_of_axle", "valve_starts", "_rows", "free_share", "always"})
 
     def _slips(self, v_ref: np.ndarray, wheels: np.ndarray) -> np.ndarray:
         """Per environment, whether a wheel's reading (m/s) is below the reference (m/s) by more
@@ -655,12 +656,11 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         self.decel_ref = np.where(known, np.clip(slope, 0.0, self.ref_limit), self.decel_ref)
         self.prev_ref, self.prev_age = v_ref, age
         self.vent[...] = False
-        allowed = None
+        allowed = self.always
         if self.release == "working":  # the loop works: it asked for under the demand in the
             # last period, or a wheel slips beyond the estimator's working band now
             allowed = self.working | self._slips(v_ref, v)
-        rows, axles = self._release_step(age, decel, dt, allowed)
-        self.vent[rows, axles] = True
+        self._release_step(age, decel, dt, allowed, self.vent)
 
     def command(self, obs: np.ndarray, target_kmh: np.ndarray) -> np.ndarray:
         """Valve actions ``(n_envs, n_valves)`` (float64 in [-1, 1], the continuous action

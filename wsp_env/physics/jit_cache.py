@@ -26,7 +26,8 @@ KERNEL_SOURCES = (  # every file with compiled kernels, relative to the package
     "evaluation/reference.py",
     "rig/roller_rig.py",
     "calibration/recurrence.py",
-    "baselines/oracle.py",  # installed as wsp_env.baselines; ../baselines in a checkout
+    "baselines/classical.py",  # installed as wsp_env.baselines; ../baselines in a checkout
+    "baselines/oracle.py",
 )
 STAMP_NAME = "wsp_env_kernels.sha256"
 
