@@ -120,10 +120,21 @@ def _add_extras(venv: Path, tmp: Path, wheel: Path, extras: str) -> None:
     _pip(venv, tmp, f"{wheel}{extras}")
 
 
+# one short stop on soap: the evaluation path from the installed copy, with a suite file of the
+# user's (the shipped suites are installed too: `validate` reads them)
+SMALL_SUITE = """name: small
+description: one short stop on soap
+seeds: [0]
+cases:
+  - {name: soap, rail: soap, mu_contaminated: 0.08, pattern: uniform, speeds_kmh: [60]}
+"""
+
+
 class Installed:
     def __init__(self, venv: Path, work: Path) -> None:
         self.venv, self.work = venv, work
         work.mkdir()
+        (work / "small.yaml").write_text(SMALL_SUITE)
 
     def run(self, *args: str) -> subprocess.CompletedProcess:
         exe = str(self.venv / "bin" / "wsp-env")
@@ -173,7 +184,7 @@ def test_every_command_runs_from_a_fresh_install_then_learning_with_rl_and_expor
     site.ok("simulate", "--speed-kmh", "80", "--json", "sim.json", "--trace", "trace")
     assert site.read("sim.json")["stopping_distance_m"] > 0
     assert (site.work / "trace.csv").exists() and (site.work / "trace.meta.json").exists()
-    site.ok("evaluate", "--suite", "quick", "--policy", "classical", "--no-progress",
+    site.ok("evaluate", "--suite", "small.yaml", "--policy", "classical", "--no-progress",
             "--json", "eval.json")  # fmt: skip
     assert {r["policy"] for r in site.read("eval.json")["runs"]} == {"classical"}
     site.ok("calibrate", "trace.csv", "--json", "cal.json")
@@ -224,8 +235,8 @@ def test_every_command_runs_from_a_fresh_install_then_learning_with_rl_and_expor
     assert site.read("sim.json")["policy"] == uic
     for vehicle, names in by_vehicle.items():  # each on the vehicle it was trained for
         policies = [a for p in ["classical", *names] for a in ("--policy", p)]
-        site.ok("evaluate", "--vehicle", vehicle, "--suite", "quick", *policies, "--no-progress",
-                "--json", f"eval_{vehicle}.json")  # fmt: skip
+        site.ok("evaluate", "--vehicle", vehicle, "--suite", "small.yaml", *policies,
+                "--no-progress", "--json", f"eval_{vehicle}.json")  # fmt: skip
         runs = site.read(f"eval_{vehicle}.json")["runs"]
         assert {r["policy"] for r in runs} == {"classical", *names}
         assert all(r["stopped"] for r in runs)
