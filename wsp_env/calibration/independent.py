@@ -11,7 +11,8 @@ Why it is independent
 ---------------------
 It was written from the public trace-format specification (``docs/trace_format.md``), the
 physical facts in ``shared/REFERENCES.md`` and the source papers only, without reading or
-importing anything of the code under test. It imports only the standard library and numpy.
+importing anything of the code under test. It imports only the standard library, numpy and
+numba (its 20 ms cycle loop is compiled: a compiler, not code of the project).
 Its models deliberately differ from a textbook/Polach setup: a Burckhardt-type creep curve,
 a rail-energy cleaning law of its own, its own WSP algorithm and its own logger model.
 Agreement between the tool and this generator is therefore evidence, not an echo.
@@ -211,6 +212,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numba import njit
 
 G = 9.80665
 BCU_DT = 0.02
@@ -673,14 +675,371 @@ def random_effect(
 
 
 # ----------------------------------------------------------------------------------------
+# the 20 ms cycles, compiled
+# ----------------------------------------------------------------------------------------
+# The cycle loop below was numpy array operations on a handful of axles (about 1 s a stop, most
+# of it interpreter overhead); compiled with numba it is the same IEEE operations in the same
+# order: ``np.maximum``/``np.minimum``/``np.clip`` keep numpy's NaN rule (``_fmax``, ``_fmin``),
+# Python's ``max``/``min`` theirs (``_pmax``, ``_pmin``), a sum over axles numpy's pairwise order
+# (``_np_sum``), and ``a[idx] += v`` numpy's buffered fancy assignment (the last write wins).
+# numba is a compiler, not code of the project: the generator still shares nothing with it.
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _fmax(a, b):  # np.maximum: NaN if either is
+    return a if (a >= b or a != a) else b
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _fmin(a, b):  # np.minimum: NaN if either is
+    return a if (a <= b or a != a) else b
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _pmax(a, b):  # Python's max(a, b): the first unless the second is larger
+    return b if b > a else a
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _pmin(a, b):  # Python's min(a, b): the first unless the second is smaller
+    return b if b < a else a
+
+
+@njit(cache=True, error_model="numpy")
+def _np_sum(a):
+    """``a.sum()`` as numpy adds a float64 vector of up to 128 entries (pairwise blocks of 8)."""
+    n = a.shape[0]
+    if n < 8:
+        res = 0.0
+        for i in range(n):
+            res += a[i]
+        return res
+    r = a[:8].copy()
+    i = 8
+    while i < n - (n % 8):
+        for j in range(8):
+            r[j] += a[i + j]
+        i += 8
+    res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
+    while i < n:
+        res += a[i]
+        i += 1
+    return res
+
+
+@njit(cache=True, error_model="numpy")
+def _cycles(
+    scalars, counts, r, inv_r, Jdt_r, gain, n_static, k_tr, offset, axle_fac, L_pre, qpow,
+    v_noise, p_noise, mu_cont_g, mu_clean_g, e_grid, dec_fill, dec_vent, p_hist,
+    rec_V, rec_X, rec_om, rec_p, rec_T, rec_F, rec_N, rec_L, rec_pd, rec_vref, rec_state, rec_ub,
+):  # fmt: skip
+    """The BCU and the physics, cycle by cycle, into the ``rec_`` arrays (``simulate_record``);
+    returns (cycles recorded, the stop's cycle or -1, the position at the brake application)."""
+    (v0, r_nom, M, pth, res_a, res_b, res_c, f_grade, ub_force, c2, c3, g_pk, A_s, B_s,
+     one_minus_A, lead_in_s, demand_ramp_s, demand_drop_s, demand_drop_factor, p_max_bar,
+     wsp_off_kmh, ref_margin, s1_kmh, s1_frac, s2_kmh, s2_frac, a_dec, mu_speed_drop,
+     mu_speed_kmh, grid_lo, inv_ec, lag_sub, dec_tc) = scalars  # fmt: skip
+    (n_max, k_b, n_cells, n_hold_min, n_hold_max, n_vent_min, n_on, n_per, n_step_max, n_delay,
+     tail_k, good, lagged, filtered) = counts  # fmt: skip
+    n = r.shape[0]
+    ab_a, ab_b = 0.35, 0.04
+    cmd_line = np.zeros((n_delay + 1, n), dtype=np.int8)  # the valve commands on their way
+
+    V = v0
+    X = 0.0
+    om = np.empty(n)
+    xf = np.empty(n)
+    for i in range(n):
+        om[i] = V / r[i]
+        xf[i] = om[i] * r_nom * 3.6
+    p = np.zeros(n)
+    a_f = 0.0
+    F = np.zeros(n)
+    T = np.zeros(n)
+    af = np.zeros(n)
+    vref = xf[0]
+    for i in range(1, n):
+        vref = _fmax(vref, xf[i])
+    aref = 0.0
+    state = np.zeros(n, dtype=np.int8)
+    cmd = np.zeros(n, dtype=np.int8)
+    valve = np.zeros(n, dtype=np.int8)
+    timer = np.zeros(n, dtype=np.int64)
+    stepped = np.zeros(n, dtype=np.bool_)
+    zp = np.empty(n)
+    Ln = np.empty(n)
+    p_sub = np.empty((N_SUB, n))
+    p_use = np.empty((N_SUB, n))
+    T_sub = np.empty((N_SUB, n))
+    p_eff = np.zeros(n)  # the first-order lagged pressure (pressure_time_constant)
+    e_slide = np.empty(n)
+    rLn = np.empty(n)
+    w = np.empty(n)
+    a_m = np.empty(n)
+    K = np.empty(n)
+    C = np.empty(n)
+    Ca = np.empty(n)
+    x_max = np.empty(n)
+    x = np.empty(n)
+    kap = np.empty(n)
+    f = np.empty(n)
+    at_max = np.zeros(n, dtype=np.bool_)
+    om_new = np.empty(n)
+    F_used = np.empty(n)
+    i0s = np.empty(n, dtype=np.int64)
+    add = np.empty(n)
+    dens = np.empty(n)
+    frac0 = np.empty(n)
+    X_b = 0.0
+    k_end = n_max
+    k_stop = -1
+    acc = 0.0
+    m_sub = 0
+    for k in range(n_max):
+        t = k * BCU_DT
+        braking = k >= k_b
+        if k == k_b:
+            X_b = X
+        # ---------------- BCU: sensing and WSP ----------------
+        cand = 0.0
+        for i in range(n):
+            z = _fmax(om[i] * r_nom * 3.6 + v_noise[k, i], 0.0)
+            zp[i] = p[i] + p_noise[k, i]
+            xp = xf[i] + af[i] * BCU_DT
+            res = z - xp
+            xf[i] = xp + ab_a * res
+            af[i] = af[i] + (ab_b / BCU_DT) * res
+            cand = xf[i] if i == 0 else _fmax(cand, xf[i])
+        a_bound = _pmin(_pmax(aref + ref_margin, 0.8), 2.5)
+        v_new = _pmin(_pmax(cand, vref - a_bound * BCU_DT * 3.6), vref + 0.5 * BCU_DT * 3.6)
+        aref += ((vref - v_new) / (BCU_DT * 3.6) - aref) * (BCU_DT / 0.3)
+        vref = v_new
+        pd = p_max_bar * _pmin(1.0, (t - lead_in_s) / demand_ramp_s) if braking else 0.0
+        if demand_drop_s > 0.0 and t - lead_in_s >= demand_drop_s:
+            pd *= demand_drop_factor
+        pd = _pmax(pd, 0.0)
+        if braking and vref > wsp_off_kmh:
+            s1 = _pmin(_pmax(s1_kmh, s1_frac * vref), 0.3 * vref)
+            s2 = _pmin(_pmax(s2_kmh, s2_frac * vref), 0.45 * vref)
+            for i in range(n):
+                dv = vref - xf[i]
+                arel = -af[i] / 3.6 - aref
+                crit_vent = (dv > s2) or ((arel > 2 * a_dec) and (dv > s1))
+                crit_hold = (dv > s1) or ((arel > a_dec) and (dv > 0.5 * s1))
+                recovered = (dv < 0.4 * s1) and (arel > -1.0)
+                timer[i] += 1
+                st = state[i]
+                nw = st
+                if st == APPLY and crit_hold:
+                    nw = HOLD
+                if st == APPLY and crit_vent:
+                    nw = VENT
+                to_apply = st == HOLD and not crit_vent and timer[i] >= n_hold_min and recovered
+                if to_apply:
+                    nw = APPLY
+                if st == HOLD and (crit_vent or (timer[i] >= n_hold_max and dv > s1)):
+                    nw = VENT
+                if st == VENT and timer[i] >= n_vent_min and (dv < s1 or arel < -2.0):
+                    nw = HOLD
+                if nw != st:
+                    timer[i] = 0
+                stepped[i] = stepped[i] or to_apply
+                state[i] = nw
+                if state[i] == APPLY and (zp[i] > pd - 0.15 or timer[i] > n_step_max):
+                    stepped[i] = False
+                cmd[i] = state[i]
+                if stepped[i] and state[i] == APPLY and (timer[i] % n_per) >= n_on:
+                    cmd[i] = HOLD
+        else:
+            for i in range(n):
+                state[i] = APPLY
+                stepped[i] = False
+                timer[i] = 0
+                cmd[i] = state[i]
+        slot = k % (n_delay + 1)  # the command of n_delay + 1 cycles ago reaches the valve
+        for i in range(n):
+            valve[i] = cmd_line[slot, i]
+            cmd_line[slot, i] = cmd[i]
+
+        # ---------------- record (values at t_k) ----------------
+        rec_V[k] = V
+        rec_X[k] = X
+        for i in range(n):
+            rec_om[k, i] = om[i]
+            rec_p[k, i] = zp[i]
+            rec_T[k, i] = T[i]
+            rec_F[k, i] = F[i]
+            rec_N[k, i] = n_static[i] + k_tr[i] * a_f
+            rec_state[k, i] = state[i]
+        rec_pd[k] = pd
+        rec_vref[k] = vref
+        rec_ub[k] = ub_force * pd / p_max_bar if V > 0 else 0.0
+        if k_stop < 0 and braking and V * 3.6 < STOP_KMH:
+            k_stop = k
+            k_end = min(n_max, k + tail_k + 1)
+        if k + 1 >= k_end:
+            k_end = k + 1
+            break
+
+        # ---------------- adhesion level for this cycle ----------------
+        v_kmh = V * 3.6
+        f_v = 1.0 - mu_speed_drop * (1.0 - math.exp(-v_kmh / mu_speed_kmh))
+        for i in range(n):
+            if braking:
+                # read one cell beyond where this cycle's own deposit will go (< the wheelbase)
+                xi0 = X - X_b - offset[i] + (V * BCU_DT + GRID_DX)
+                idx0 = min(max(np.int64((xi0 - grid_lo) / GRID_DX), 0), n_cells - 1)
+                if good:
+                    Lv = mu_clean_g[idx0]
+                else:
+                    rho = qpow[i] * np.exp(-e_grid[idx0] * inv_ec)
+                    mc = mu_clean_g[idx0]
+                    Lv = mc + (mu_cont_g[idx0] - mc) * rho
+                Ln[i] = Lv * (f_v * axle_fac[i])
+            else:
+                Ln[i] = L_pre[i] * f_v
+            rec_L[k, i] = Ln[i] * g_pk
+
+        # ---------------- pressures over the cycle (exact first order) ----------------
+        for i in range(n):
+            vent = valve[i] == VENT
+            target = 0.0 if vent else pd
+            down = vent or (p[i] > target)
+            for j in range(N_SUB):
+                decay = dec_vent[j] if down else dec_fill[j]
+                p_sub[j, i] = p[i] if valve[i] == HOLD else target + (p[i] - target) * decay
+        if lagged:
+            for j in range(N_SUB):
+                m = m_sub + 1 + j
+                for i in range(n):
+                    p_hist[m, i] = p_sub[j, i]
+            for j in range(N_SUB):
+                q = _fmax(np.float64(m_sub + 1 + j) - lag_sub, 0.0)
+                i0 = np.int64(np.floor(q))
+                fr = q - i0
+                i1 = min(i0 + 1, m_sub + N_SUB)
+                for i in range(n):
+                    p_use[j, i] = p_hist[i0, i] * (1 - fr) + p_hist[i1, i] * fr
+        else:
+            p_use[:, :] = p_sub
+        if filtered:  # first order behind the dead time, exact for a pressure held per substep
+            for j in range(N_SUB):
+                for i in range(n):
+                    p_eff[i] = p_use[j, i] + (p_eff[i] - p_use[j, i]) * dec_tc
+                    p_use[j, i] = p_eff[i]
+        for j in range(N_SUB):
+            for i in range(n):
+                T_sub[j, i] = gain[i] * _fmax(p_use[j, i] - pth, 0.0)
+        for i in range(n):
+            p[i] = p_sub[N_SUB - 1, i]
+        m_sub += N_SUB
+        f_ub = ub_force * pd / p_max_bar
+
+        # ---------------- substeps ----------------
+        X_start = X
+        for i in range(n):
+            e_slide[i] = 0.0
+            rLn[i] = r[i] * Ln[i]
+        for j in range(N_SUB):
+            V1 = V + SUB_DT * acc if V > 0.0 else 0.0  # predicted speed at the substep end
+            if V1 < 0.0:
+                V1 = 0.0
+            vd = V1 if V1 > V_MIN_CREEP else V_MIN_CREEP
+            s_max = V1 / vd
+            # Implicit Euler for omega (sliding-speed factor h frozen over the substep), in the
+            # creep s: G(s) = a_m m(s) + K s - C = 0 with a_m = r L N h, K = J vd/(r dt),
+            # C = T + J w/(r dt). G(0) = -C and G increases, so the root has the sign of C:
+            # solve f(x) = a_m (1 - exp(-c2 x) - c3 x) + K x - |C| = 0 for x = |s|. Newton in
+            # x where the curve is saturated (c2 x > 2: f nearly linear), Newton in
+            # z = exp(-c2 x) elsewhere (f convex and decreasing in z: monotone convergence).
+            for i in range(n):
+                T[i] = T_sub[j, i]
+                w[i] = V1 - om[i] * r[i]
+                a_m[i] = (rLn[i] * (n_static[i] + k_tr[i] * a_f)) * (
+                    A_s + one_minus_A * np.exp(-B_s * np.abs(w[i]))
+                )
+                K[i] = Jdt_r[i] * vd
+                C[i] = T[i] + Jdt_r[i] * w[i]
+                Ca[i] = np.abs(C[i])
+                x_max[i] = s_max if C[i] >= 0.0 else 0.05
+                x[i] = _fmin(np.abs(w[i]) / vd, x_max[i])
+                kap[i] = (K[i] - c3 * a_m[i]) / c2
+            any_max = False
+            for _it in range(8):
+                worst = 0.0
+                any_max = False
+                for i in range(n):
+                    e2 = np.exp(-c2 * x[i])
+                    f[i] = a_m[i] * (1.0 - e2 - c3 * x[i]) + K[i] * x[i] - Ca[i]
+                    at_max[i] = x[i] >= x_max[i]
+                    any_max = any_max or at_max[i]
+                    fe = _fmax(f[i], 0.0) if at_max[i] else f[i]
+                    worst = np.abs(fe) if i == 0 else _fmax(worst, np.abs(fe))
+                if worst < TOL_G:
+                    break
+                for i in range(n):
+                    e2 = np.exp(-c2 * x[i])
+                    x_s = x[i] - f[i] / (a_m[i] * (c2 * e2 - c3) + K[i])
+                    z_new = e2 + f[i] * e2 / (a_m[i] * e2 + kap[i])
+                    x_z = np.log(_fmax(z_new, 1e-300)) / -c2
+                    xn = x_s if ((c2 * x[i] > 2.0) or (z_new <= 0.0)) else x_z
+                    x[i] = _fmin(_fmax(xn, 0.0), x_max[i])
+            for i in range(n):
+                om_new[i] = (V1 - np.copysign(x[i], C[i]) * vd) * inv_r[i]
+                F_used[i] = Jdt_r[i] * (om_new[i] - om[i]) + T[i] * inv_r[i]
+            if any_max:
+                for i in range(n):
+                    if at_max[i] and f[i] < 0.0:  # locked
+                        F_used[i] = a_m[i] * inv_r[i] * (1.0 - math.exp(-c2 * s_max) - c3 * s_max)
+                    om_new[i] = _fmax(om_new[i], 0.0)
+            for i in range(n):
+                om[i] = om_new[i]
+                F[i] = F_used[i]
+                e_slide[i] += F_used[i] * w[i]
+            if V > 0.0:
+                R = res_a + (res_b + res_c * V) * V
+                acc = -(_np_sum(F_used) + R + f_grade + f_ub) / M
+                V_new = V + SUB_DT * acc
+                if V_new < 0.0:
+                    V_new = 0.0
+                a_f += (-(V_new - V) / SUB_DT - a_f) * (SUB_DT / 0.1)
+                X += 0.5 * (V + V_new) * SUB_DT
+                V = V_new
+            else:
+                a_f += (0.0 - a_f) * (SUB_DT / 0.1)
+        # ---------------- rail cleaning: deposit the cycle's sliding energy ----------------
+        if braking and not good:
+            dx = X - X_start
+            if dx > 1e-9:
+                for i in range(n):
+                    e_slide[i] = _fmax(e_slide[i], 0.0) * SUB_DT
+                    x0 = (X_start - X_b - offset[i] - grid_lo) / GRID_DX
+                    x1 = (X - X_b - offset[i] - grid_lo) / GRID_DX
+                    i0s[i] = min(max(np.int64(np.floor(x0)), 0), n_cells - 2)
+                    frac0[i] = _fmin(_fmax((np.float64(i0s[i] + 1) - x0) / (x1 - x0), 0.0), 1.0)
+                    dens[i] = e_slide[i] / GRID_DX  # J per metre, split over the cells covered
+                # e_grid[i0] += ...: every sum from the values before, the last write wins
+                for i in range(n):
+                    add[i] = e_grid[i0s[i]] + dens[i] * frac0[i]
+                for i in range(n):
+                    e_grid[i0s[i]] = add[i]
+                for i in range(n):
+                    add[i] = e_grid[i0s[i] + 1] + dens[i] * (1.0 - frac0[i])
+                for i in range(n):
+                    e_grid[i0s[i] + 1] = add[i]
+    return k_end, k_stop, X_b
+
+
+# ----------------------------------------------------------------------------------------
 # physics + BCU
 # ----------------------------------------------------------------------------------------
 
 
-def _simulate(
+def simulate_record(
     sc: Scenario, effects: Sequence[Effect] = (), seed: int | None = None
 ) -> dict[str, Any]:
-    """Run the physics and the WSP; returns the 20 ms internal record (truth included)."""
+    """Run the physics and the WSP; returns the 20 ms internal record (truth included): what
+    ``generate`` logs from, and ``scripts/independent_equivalence.py`` compares across versions."""
     seed = sc.seed if seed is None else seed
     ss = np.random.SeedSequence(seed)
     rng_bcu = np.random.default_rng(ss.spawn(1)[0])
@@ -744,19 +1103,14 @@ def _simulate(
     p_hist = np.zeros((n_max * N_SUB + 1, n)) if lag > 0 else None
     tc = tr["pressure_tc"]
     dec_tc = math.exp(-SUB_DT / tc) if tc > 0 else 0.0
-    p_eff = np.zeros(n)  # the first-order lagged pressure (pressure_time_constant)
 
     # WSP parameters
-    ab_a, ab_b = 0.35, 0.04
     n_hold_min = max(1, round(sc.wsp_hold_min_s / BCU_DT))
     n_hold_max = max(n_hold_min + 1, round(sc.wsp_hold_max_s / BCU_DT))
     n_vent_min = max(1, round(sc.wsp_vent_min_s / BCU_DT))
     n_on = max(1, round(sc.wsp_step_on_s / BCU_DT))
     n_per = n_on + max(1, round(sc.wsp_step_off_s / BCU_DT))
     n_step_max = round(4.0 / BCU_DT)
-    a_dec = sc.wsp_decel_mps2
-    n_delay = sc.valve_delay_cycles
-    cmd_line = [np.zeros(n, dtype=np.int8) for _ in range(n_delay + 1)]
 
     # records
     rec_V = np.empty(n_max)
@@ -766,227 +1120,38 @@ def _simulate(
     rec_T = np.empty((n_max, n))
     rec_F = np.empty((n_max, n))
     rec_N = np.empty((n_max, n))
-    rec_L = np.empty((n_max, n))
+    rec_L = np.full((n_max, n), np.nan)  # the last cycle recorded computes none
     rec_pd = np.empty(n_max)
     rec_vref = np.empty(n_max)
     rec_state = np.empty((n_max, n), dtype=np.int8)
     rec_ub = np.empty(n_max)
 
-    V = v0
-    X = 0.0
-    om = V / r
-    p = np.zeros(n)
-    a_f = 0.0
-    F = np.zeros(n)
-    T = np.zeros(n)
-    xf = om * r_nom * 3.6
-    af = np.zeros(n)
-    vref = float(xf.max())
-    aref = 0.0
-    state = np.zeros(n, dtype=np.int8)
-    timer = np.zeros(n, dtype=np.int64)
-    stepped = np.zeros(n, dtype=bool)
-    X_b = 0.0
-    L_pre = sc.mu_contaminated / g_pk * axle_fac
-    k_end = n_max
-    k_stop = -1
-    acc = 0.0
+    def axles(x: Any) -> np.ndarray:  # a per-axle float array (a scalar broadcast)
+        return np.ascontiguousarray(np.broadcast_to(np.asarray(x, dtype=np.float64), (n,)))
+
     inv_r = 1.0 / r
     Jdt_r = J / (SUB_DT * r)
-    m_sub = 0
-    for k in range(n_max):
-        t = k * BCU_DT
-        braking = k >= k_b
-        if k == k_b:
-            X_b = X
-        # ---------------- BCU: sensing and WSP ----------------
-        z = np.maximum(om * r_nom * 3.6 + v_noise[k], 0.0)
-        zp = p + p_noise[k]
-        xp = xf + af * BCU_DT
-        res = z - xp
-        xf = xp + ab_a * res
-        af = af + (ab_b / BCU_DT) * res
-        a_bound = min(max(aref + sc.wsp_ref_margin_mps2, 0.8), 2.5)
-        cand = float(xf.max())
-        v_new = min(max(cand, vref - a_bound * BCU_DT * 3.6), vref + 0.5 * BCU_DT * 3.6)
-        aref += ((vref - v_new) / (BCU_DT * 3.6) - aref) * (BCU_DT / 0.3)
-        vref = v_new
-        pd = sc.p_max_bar * min(1.0, (t - sc.lead_in_s) / sc.demand_ramp_s) if braking else 0.0
-        if sc.demand_drop_s > 0.0 and t - sc.lead_in_s >= sc.demand_drop_s:
-            pd *= sc.demand_drop_factor
-        pd = max(pd, 0.0)
-        if braking and vref > sc.wsp_off_kmh:
-            dv = vref - xf
-            arel = -af / 3.6 - aref
-            s1 = min(max(sc.wsp_s1_kmh, sc.wsp_s1_frac * vref), 0.3 * vref)
-            s2 = min(max(sc.wsp_s2_kmh, sc.wsp_s2_frac * vref), 0.45 * vref)
-            crit_vent = (dv > s2) | ((arel > 2 * a_dec) & (dv > s1))
-            crit_hold = (dv > s1) | ((arel > a_dec) & (dv > 0.5 * s1))
-            recovered = (dv < 0.4 * s1) & (arel > -1.0)
-            timer += 1
-            new = state.copy()
-            is_a = state == APPLY
-            is_h = state == HOLD
-            is_v = state == VENT
-            new[is_a & crit_hold] = HOLD
-            new[is_a & crit_vent] = VENT
-            to_apply = is_h & ~crit_vent & (timer >= n_hold_min) & recovered
-            new[to_apply] = APPLY
-            new[is_h & (crit_vent | ((timer >= n_hold_max) & (dv > s1)))] = VENT
-            new[is_v & (timer >= n_vent_min) & ((dv < s1) | (arel < -2.0))] = HOLD
-            changed = new != state
-            timer[changed] = 0
-            stepped |= to_apply
-            state = new
-            stepped &= ~((state == APPLY) & ((zp > pd - 0.15) | (timer > n_step_max)))
-            cmd = state.copy()
-            cmd[stepped & (state == APPLY) & ((timer % n_per) >= n_on)] = HOLD
-        else:
-            state[:] = APPLY
-            stepped[:] = False
-            timer[:] = 0
-            cmd = state.copy()
-        cmd_line.append(cmd)
-        valve = cmd_line.pop(0)
-
-        # ---------------- record (values at t_k) ----------------
-        rec_V[k] = V
-        rec_X[k] = X
-        rec_om[k] = om
-        rec_p[k] = zp
-        rec_T[k] = T
-        rec_F[k] = F
-        rec_N[k] = n_static + k_tr * a_f
-        rec_pd[k] = pd
-        rec_vref[k] = vref
-        rec_state[k] = state
-        rec_ub[k] = ub_force * pd / sc.p_max_bar if V > 0 else 0.0
-        if k_stop < 0 and braking and V * 3.6 < STOP_KMH:
-            k_stop = k
-            k_end = min(n_max, k + round(sc.record_tail_s / BCU_DT) + 1)
-        if k + 1 >= k_end:
-            k_end = k + 1
-            break
-
-        # ---------------- adhesion level for this cycle ----------------
-        v_kmh = V * 3.6
-        f_v = 1.0 - sc.mu_speed_drop * (1.0 - math.exp(-v_kmh / sc.mu_speed_kmh))
-        if braking:
-            # read one cell beyond where this cycle's own deposit will go (< the wheelbase)
-            xi0 = X - X_b - offset + (V * BCU_DT + GRID_DX)
-            idx0 = np.clip(((xi0 - grid_lo) / GRID_DX).astype(np.int64), 0, n_cells - 1)
-            if good:
-                Lv = mu_clean_g[idx0]
-            else:
-                rho = qpow * np.exp(-e_grid[idx0] * inv_ec)
-                mc = mu_clean_g[idx0]
-                Lv = mc + (mu_cont_g[idx0] - mc) * rho
-            Ln = Lv * (f_v * axle_fac)
-        else:
-            Ln = L_pre * f_v
-        rec_L[k] = Ln * g_pk
-
-        # ---------------- pressures over the cycle (exact first order) ----------------
-        vent = valve == VENT
-        hold = valve == HOLD
-        target = np.where(vent, 0.0, pd)
-        down = vent | (p > target)
-        decay = np.where(down, dec_vent, dec_fill)
-        p_sub = target + (p - target) * decay
-        p_sub = np.where(hold, p, p_sub)
-        if p_hist is not None:
-            p_hist[m_sub + 1 : m_sub + 1 + N_SUB] = p_sub
-            q = np.arange(m_sub + 1, m_sub + 1 + N_SUB) - lag_sub
-            q = np.maximum(q, 0.0)
-            i0 = np.floor(q).astype(np.int64)
-            fr = (q - i0)[:, None]
-            p_use = p_hist[i0] * (1 - fr) + p_hist[np.minimum(i0 + 1, m_sub + N_SUB)] * fr
-        else:
-            p_use = p_sub
-        if tc > 0:  # first order behind the dead time, exact for a pressure held per substep
-            filt = np.empty_like(p_use)
-            for j in range(N_SUB):
-                p_eff = p_use[j] + (p_eff - p_use[j]) * dec_tc
-                filt[j] = p_eff
-            p_use = filt
-        T_sub = gain * np.maximum(p_use - pth, 0.0)
-        p = p_sub[-1]
-        m_sub += N_SUB
-        f_ub = ub_force * pd / sc.p_max_bar
-
-        # ---------------- substeps ----------------
-        e_slide = np.zeros(n)
-        X_start = X
-        rLn = r * Ln
-        for j in range(N_SUB):
-            T = T_sub[j]
-            V1 = V + SUB_DT * acc if V > 0.0 else 0.0  # predicted speed at the substep end
-            if V1 < 0.0:
-                V1 = 0.0
-            vd = V1 if V1 > V_MIN_CREEP else V_MIN_CREEP
-            s_max = V1 / vd
-            w = V1 - om * r
-            # Implicit Euler for omega (sliding-speed factor h frozen over the substep), in the
-            # creep s: G(s) = a_m m(s) + K s - C = 0 with a_m = r L N h, K = J vd/(r dt),
-            # C = T + J w/(r dt). G(0) = -C and G increases, so the root has the sign of C:
-            # solve f(x) = a_m (1 - exp(-c2 x) - c3 x) + K x - |C| = 0 for x = |s|. Newton in
-            # x where the curve is saturated (c2 x > 2: f nearly linear), Newton in
-            # z = exp(-c2 x) elsewhere (f convex and decreasing in z: monotone convergence).
-            a_m = rLn * (n_static + k_tr * a_f) * (A_s + one_minus_A * np.exp(-B_s * np.abs(w)))
-            K = Jdt_r * vd
-            C = T + Jdt_r * w
-            Ca = np.abs(C)
-            x_max = s_max if C.min() >= 0.0 else np.where(C >= 0.0, s_max, 0.05)
-            x = np.minimum(np.abs(w) / vd, x_max)
-            kap = (K - c3 * a_m) / c2
-            for _it in range(8):
-                e2 = np.exp(-c2 * x)
-                f = a_m * (1.0 - e2 - c3 * x) + K * x - Ca
-                at_max = x >= x_max
-                if at_max.any():
-                    fe = np.where(at_max, np.maximum(f, 0.0), f)
-                else:
-                    fe = f
-                if np.abs(fe).max() < TOL_G:
-                    break
-                x_s = x - f / (a_m * (c2 * e2 - c3) + K)
-                z_new = e2 + f * e2 / (a_m * e2 + kap)
-                x_z = np.log(np.maximum(z_new, 1e-300)) / -c2
-                x = np.where((c2 * x > 2.0) | (z_new <= 0.0), x_s, x_z)
-                x = np.minimum(np.maximum(x, 0.0), x_max)
-            om_new = (V1 - np.copysign(x, C) * vd) * inv_r
-            F_used = Jdt_r * (om_new - om) + T * inv_r
-            if at_max.any():
-                locked = at_max & (f < 0.0)
-                f_lock = a_m * inv_r * (1.0 - math.exp(-c2 * s_max) - c3 * s_max)
-                F_used = np.where(locked, f_lock, F_used)
-                om_new = np.maximum(om_new, 0.0)
-            om = om_new
-            F = F_used
-            e_slide += F_used * w
-            if V > 0.0:
-                R = res_a + (res_b + res_c * V) * V
-                acc = -(F_used.sum() + R + f_grade + f_ub) / M
-                V_new = V + SUB_DT * acc
-                if V_new < 0.0:
-                    V_new = 0.0
-                a_f += (-(V_new - V) / SUB_DT - a_f) * (SUB_DT / 0.1)
-                X += 0.5 * (V + V_new) * SUB_DT
-                V = V_new
-            else:
-                a_f += (0.0 - a_f) * (SUB_DT / 0.1)
-        # ---------------- rail cleaning: deposit the cycle's sliding energy ----------------
-        if braking and not good:
-            e_slide = np.maximum(e_slide, 0.0) * SUB_DT
-            dx = X - X_start
-            if dx > 1e-9:
-                x0 = (X_start - X_b - offset - grid_lo) / GRID_DX
-                x1 = (X - X_b - offset - grid_lo) / GRID_DX
-                i0 = np.clip(np.floor(x0).astype(np.int64), 0, n_cells - 2)
-                frac0 = np.clip((i0 + 1 - x0) / (x1 - x0), 0.0, 1.0)
-                dens = e_slide / GRID_DX  # J per metre, split over the cells covered
-                e_grid[i0] += dens * frac0
-                e_grid[i0 + 1] += dens * (1.0 - frac0)
+    scalars = (
+        v0, r_nom, M, pth, res_a, res_b, res_c, f_grade, ub_force, c2, c3, g_pk, A_s, B_s,
+        one_minus_A, sc.lead_in_s, sc.demand_ramp_s, sc.demand_drop_s, sc.demand_drop_factor,
+        sc.p_max_bar, sc.wsp_off_kmh, sc.wsp_ref_margin_mps2, sc.wsp_s1_kmh, sc.wsp_s1_frac,
+        sc.wsp_s2_kmh, sc.wsp_s2_frac, sc.wsp_decel_mps2, sc.mu_speed_drop, sc.mu_speed_kmh,
+        grid_lo, inv_ec, lag_sub, dec_tc,
+    )  # fmt: skip
+    counts = (
+        n_max, k_b, n_cells, n_hold_min, n_hold_max, n_vent_min, n_on, n_per, n_step_max,
+        sc.valve_delay_cycles, round(sc.record_tail_s / BCU_DT), int(good), int(lag > 0),
+        int(tc > 0),
+    )  # fmt: skip
+    k_end, k_stop, X_b = _cycles(
+        tuple(float(x) for x in scalars), tuple(int(x) for x in counts),
+        axles(r), axles(inv_r), axles(Jdt_r), axles(gain), axles(n_static), axles(k_tr),
+        axles(offset), axles(axle_fac), axles(sc.mu_contaminated / g_pk * axle_fac), axles(qpow),
+        v_noise, p_noise, mu_cont_g, mu_clean_g, e_grid, dec_fill[:, 0].copy(),
+        dec_vent[:, 0].copy(), p_hist if p_hist is not None else np.zeros((1, n)),
+        rec_V, rec_X, rec_om, rec_p, rec_T, rec_F, rec_N, rec_L, rec_pd, rec_vref, rec_state,
+        rec_ub,
+    )  # fmt: skip
 
     sl = slice(0, k_end)
     return {
@@ -1044,7 +1209,7 @@ def sliding_around(
     rail can be seen by any method only where the wheels meet the adhesion limit on both sides
     of it; the detection-power study reports how often they do.
     """
-    sim = _simulate(scenario, effects, seed)
+    sim = simulate_record(scenario, effects, seed)
     k_b = sim["k_brake"]
     k_end = sim["k_stop"] if sim["k_stop"] > 0 else len(sim["t"])
     sl = slice(k_b, k_end)
@@ -1095,7 +1260,7 @@ def generate(
     """
     sc = scenario
     seed = sc.seed if seed is None else seed
-    sim = _simulate(sc, effects, seed)
+    sim = simulate_record(sc, effects, seed)
     rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(2)[1])
     n = sc.n_axles
     tr = sim["truth"]

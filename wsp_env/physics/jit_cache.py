@@ -26,6 +26,7 @@ KERNEL_SOURCES = (  # every file with compiled kernels, relative to the package
     "evaluation/reference.py",
     "rig/roller_rig.py",
     "calibration/recurrence.py",
+    "calibration/independent.py",
     "baselines/classical.py",  # installed as wsp_env.baselines; ../baselines in a checkout
     "baselines/oracle.py",
 )
