@@ -240,6 +240,9 @@ class PeriodicRelease:
         """Advance the release by one period (``age``: the reference's, s, per env; ``decel``:
         per axle, m/s^2; ``allowed``: envs where a release may begin); marks the axles to vent
         this period in ``vent`` (bool, per axle)."""
+        n = self.since_release.shape[0]
+        if not (len(age) == len(decel) == len(allowed) == len(vent) == n):  # the kernel's rows
+            raise ValueError(f"periodic release: batches of {n} environments expected")
         release_step(
             np.ascontiguousarray(age, dtype=np.float64),
             np.ascontiguousarray(decel, dtype=np.float64), float(dt),
@@ -403,6 +406,12 @@ class ClassicalWSP(ArrayState, PeriodicRelease):
         """Valve actions ``(n_envs, n_valves)`` (float32 in [-1, 1]) for the kernel's
         observation ``obs``; advances the state by one period (the compiled ``classical_act``)."""
         obs = np.asarray(obs)
+        n = self.venting_for.shape[0]  # the kernel reads n rows up to the age's column
+        if obs.ndim != 2 or obs.shape[0] != n or obs.shape[1] <= self.age_index:
+            raise ValueError(
+                f"classical WSP: observations of shape {obs.shape}, bound to {n} environments "
+                f"of {self.age_index + 1} kernel observations"
+            )
         action = np.empty((obs.shape[0], self.n_valves), dtype=np.float32)
         classical_act(
             obs, self._scales, self.age_index, self.valve_starts, self._wsp_par(),

@@ -168,3 +168,19 @@ def test_changed_thresholds_reach_the_compiled_rules():
     short.cfg = WSPConfig(**{**vars(load_wsp_config()), "safety_timer_s": 0.2})
     changed, _ = run_suite("uic_z1", suite, short, record="none")
     assert [r["stopping_distance_m"] for r in base] != [r["stopping_distance_m"] for r in changed]
+
+
+def test_a_batch_of_another_size_is_refused_not_read_past_its_end():
+    """The kernel trusts its arrays' sizes: ``act`` checks them first (a batch bound to two
+    environments given three rows, or rows too short to hold the reference's age)."""
+    from wsp_env.envs import WSPBrakingVectorEnv
+
+    env = WSPBrakingVectorEnv(num_envs=2)
+    env.reset(seed=[0, 1])
+    wsp = ClassicalWSP(load_wsp_config())
+    wsp.bind(env.core)
+    wsp.reset(np.arange(2))
+    assert wsp.act(env.core.obs).shape == (2, env.core.n_valves)
+    for bad in (np.vstack([env.core.obs, env.core.obs[:1]]), env.core.obs[:, :5]):
+        with pytest.raises(ValueError, match="classical WSP: observations of shape"):
+            wsp.act(bad)

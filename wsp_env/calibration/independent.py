@@ -683,6 +683,10 @@ def random_effect(
 # Python's ``max``/``min`` theirs (``_pmax``, ``_pmin``), a sum over axles numpy's pairwise order
 # (``_np_sum``), and ``a[idx] += v`` numpy's buffered fancy assignment (the last write wins).
 # numba is a compiler, not code of the project: the generator still shares nothing with it.
+# ``exp`` and ``log`` are the C library's in the kernel. numpy's array versions gave the same bits
+# on the AVX2 machine where the two were compared (scripts/independent_equivalence.py); on an
+# AVX-512 machine numpy uses its own vector routines, which may differ in the last bit, so the
+# numpy version's traces depended on the CPU and the compiled one's do not.
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -707,7 +711,8 @@ def _pmin(a, b):  # Python's min(a, b): the first unless the second is smaller
 
 @njit(cache=True, error_model="numpy")
 def _np_sum(a):
-    """``a.sum()`` as numpy adds a float64 vector of up to 128 entries (pairwise blocks of 8)."""
+    """``a.sum()`` as numpy (2.4) adds a float64 vector of up to 128 entries: pairwise blocks
+    of 8 (checked against ``np.sum`` for 1-40 entries; a sum of -0.0s is 0.0 in both)."""
     n = a.shape[0]
     if n < 8:
         res = 0.0
@@ -1040,6 +1045,8 @@ def simulate_record(
 ) -> dict[str, Any]:
     """Run the physics and the WSP; returns the 20 ms internal record (truth included): what
     ``generate`` logs from, and ``scripts/independent_equivalence.py`` compares across versions."""
+    if sc.valve_delay_cycles < 0:  # the compiled loop indexes its command queue by it
+        raise ValueError(f"valve_delay_cycles must be >= 0, got {sc.valve_delay_cycles}")
     seed = sc.seed if seed is None else seed
     ss = np.random.SeedSequence(seed)
     rng_bcu = np.random.default_rng(ss.spawn(1)[0])
