@@ -44,6 +44,7 @@ it).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
@@ -128,11 +129,12 @@ class ArrayState:
 
 
 # ---- compiled: one definition of each rule, IEEE arithmetic as numpy's (``KERNEL_FLAGS``) ----
-# Each env's step is a short run of scalar comparisons; as numpy array operations on a batch of
-# one it cost 156 us a period in interpreter overhead (a single stop, a trace, a calibration),
-# compiled 4.4 us (scripts/classical_act_timing.py). The same floating-point operations in the
-# same order, so the results are bit for bit those of the array version they replaced
-# (2026-12-07: the quick suite, the benchmark and ``validate`` gave identical JSON;
+# Each env's step is a short run of scalar comparisons; as numpy array operations on a batch
+# of one it cost 90-156 us a period in interpreter overhead (a single stop, a trace, a
+# calibration), compiled 4.4-8 us (scripts/classical_act_timing.py, six runs). The same
+# floating-point operations in the same order, so the results are bit for bit those of the
+# array version they replaced (2026-12-07: the quick suite, the benchmark and ``validate`` gave
+# identical JSON;
 # tests/test_classical_kernel.py keeps that version and compares every period).
 
 # the release's thresholds in ``release_par`` (``PeriodicRelease._release_par``)
@@ -140,6 +142,26 @@ RP_INTERVAL, RP_DURATION, RP_ACCEL_DONE, RP_MAX = 0, 1, 2, 3
 # the classical WSP's thresholds in ``wsp_par`` (``ClassicalWSP._wsp_par``)
 (WP_SLIP_ABS, WP_SLIP_REL, WP_RELEASE_RATIO, WP_DECEL_VENT, WP_ACCEL_HOLD, WP_FAST_FRACTION,
  WP_FILL, WP_HOLD, WP_SAFETY, WP_MIN_SPEED) = range(10)  # fmt: skip
+
+
+@lru_cache(maxsize=64)
+def _release_par_of(cfg: WSPConfig) -> np.ndarray:
+    """``cfg``'s release thresholds in ``RP_`` order, built once per config (a frozen dataclass:
+    the same object or an equal one gives the same numbers), not every period."""
+    return np.array(
+        [cfg.periodic_release_interval_s, cfg.periodic_release_duration_s,
+         cfg.release_accel_done_mps2, cfg.periodic_release_max_s], dtype=np.float64,
+    )  # fmt: skip
+
+
+@lru_cache(maxsize=64)
+def _wsp_par_of(cfg: WSPConfig) -> np.ndarray:
+    """``cfg``'s thresholds in ``WP_`` order, built once per config (as ``_release_par_of``)."""
+    return np.array(
+        [cfg.slip_abs_kmh, cfg.slip_rel, cfg.release_ratio, cfg.decel_vent_mps2,
+         cfg.accel_hold_mps2, cfg.reapply_fast_fraction, cfg.reapply_fill_s,
+         cfg.reapply_hold_s, cfg.safety_timer_s, cfg.min_speed_kmh], dtype=np.float64,
+    )  # fmt: skip
 
 
 @njit(**INLINE_FLAGS)
@@ -224,11 +246,7 @@ class PeriodicRelease:
 
     def _release_par(self) -> np.ndarray:
         """The release's thresholds from ``cfg`` as the kernels read them (``RP_``)."""
-        cfg = self.cfg
-        return np.array(
-            [cfg.periodic_release_interval_s, cfg.periodic_release_duration_s,
-             cfg.release_accel_done_mps2, cfg.periodic_release_max_s], dtype=np.float64,
-        )  # fmt: skip
+        return _release_par_of(self.cfg)
 
     def _release_state(self) -> tuple[np.ndarray, ...]:
         """The release's state arrays in ``release_env``'s order (updated in place)."""
@@ -396,12 +414,7 @@ class ClassicalWSP(ArrayState, PeriodicRelease):
 
     def _wsp_par(self) -> np.ndarray:
         """The thresholds from ``cfg`` as ``classical_act`` reads them (``WP_``)."""
-        cfg = self.cfg
-        return np.array(
-            [cfg.slip_abs_kmh, cfg.slip_rel, cfg.release_ratio, cfg.decel_vent_mps2,
-             cfg.accel_hold_mps2, cfg.reapply_fast_fraction, cfg.reapply_fill_s,
-             cfg.reapply_hold_s, cfg.safety_timer_s, cfg.min_speed_kmh], dtype=np.float64,
-        )  # fmt: skip
+        return _wsp_par_of(self.cfg)
 
     def act(self, obs: np.ndarray) -> np.ndarray:
         """Valve actions ``(n_envs, n_valves)`` (float32 in [-1, 1]) for the kernel's
