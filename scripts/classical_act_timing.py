@@ -31,16 +31,20 @@ def _array_reference() -> type:
     return module.ArrayWSP
 
 
-def _median_us(policy, core, obs: list[np.ndarray], repeats: int) -> float:
-    policy.bind(core)
-    policy.reset(np.arange(core.n_envs))
-    times = []
+def _median_us(policies: list, core, obs: list[np.ndarray], repeats: int) -> list[float]:
+    """Median microseconds per call of each policy, the passes over ``obs`` interleaved (one
+    policy's pass, then the next's) so that a change in the host's speed hits both alike."""
+    for policy in policies:
+        policy.bind(core)
+        policy.reset(np.arange(core.n_envs))
+    times: list[list[float]] = [[] for _ in policies]
     for _ in range(repeats):
-        for o in obs:
-            t0 = time.perf_counter()
-            policy.act(o)
-            times.append(time.perf_counter() - t0)
-    return 1e6 * float(np.median(times))
+        for policy, out in zip(policies, times, strict=True):
+            for o in obs:
+                t0 = time.perf_counter()
+                policy.act(o)
+                out.append(time.perf_counter() - t0)
+    return [1e6 * float(np.median(t)) for t in times]
 
 
 def main() -> None:
@@ -60,8 +64,7 @@ def main() -> None:
             obs.append(core.obs.copy())
             env.step(driver.act(core.obs))
         cfg = load_wsp_config()
-        fast = _median_us(ClassicalWSP(cfg), core, obs, 5)
-        slow = _median_us(array_wsp(cfg), core, obs, 5)
+        fast, slow = _median_us([ClassicalWSP(cfg), array_wsp(cfg)], core, obs, 5)
         print(f"| {n} | {fast:.1f} | {slow:.1f} | {slow / fast:.1f} |")
 
 
