@@ -131,7 +131,7 @@ class ArrayState:
 # ---- compiled: one definition of each rule, IEEE arithmetic as numpy's (``KERNEL_FLAGS``) ----
 # Each env's step is a short run of scalar comparisons; as numpy array operations on a batch
 # of one it cost 90-175 us a period in interpreter overhead (a single stop, a trace, a
-# calibration), compiled 4.4-9.4 us (scripts/classical_act_timing.py, eight runs). The same
+# calibration), compiled 4.4-9.4 us (scripts/classical_act_timing.py, nine runs). The same
 # floating-point operations in the same order, so the results are bit for bit those of the
 # array version they replaced (2026-12-07: the quick suite, the benchmark and ``validate`` gave
 # identical JSON;
