@@ -377,7 +377,9 @@ def test_the_calibrate_command_says_what_the_reader_made_of_the_ground_speed(tmp
 # The 20 ms records of a few stops, as digests of every array, frozen on 2026-12-07 from the numpy
 # version of the generator (c9d12bf, the last row of mu_level set to NaN: that version left it
 # unwritten) and equal to the compiled one's: a change that moves any trace by one bit fails here.
-# (Bits of the C library's exp and log, which the kernel calls: another libm might differ.)
+# (Bits of the C library's exp, log, pow and sin, which the generator calls: another libm might
+# differ. Frozen on an AVX2 machine and met on an AVX-512 one: numpy's own vector routines,
+# which differ there, are not used: tests/test_cpu_independence.py.)
 # (seed, effect, magnitude): pressure lag, a friction change along the rail, a pressure time
 # constant, a gradient on dry rail and on wet; 4-16 axles, soap, dry and wet.
 FROZEN_RECORDS = [

@@ -473,7 +473,7 @@ def random_scenario(rng: np.random.Generator, **overrides: Any) -> Scenario:
     d["time_jitter_s"] = float(pick("time_jitter_s", u(0.0, 0.002)))
     d["p_quant_bar"] = float(pick("p_quant_bar", float(rng.choice([0.01, 0.02, 0.05]))))
     d["p_noise_bar"] = float(pick("p_noise_bar", u(0.003, 0.015)))
-    d["v_noise_kmh"] = float(pick("v_noise_kmh", float(np.exp(u(np.log(0.05), np.log(0.5))))))
+    d["v_noise_kmh"] = float(pick("v_noise_kmh", math.exp(u(math.log(0.05), math.log(0.5)))))
     d["v_quant_kmh"] = float(pick("v_quant_kmh", float(rng.choice([0.01, 0.01, 0.05]))))
     d["gps_rate_hz"] = float(pick("gps_rate_hz", float(rng.choice([1.0, 2.0, 5.0, 10.0]))))
     d["gps_noise_kmh"] = float(pick("gps_noise_kmh", u(0.05, 0.3)))
@@ -683,10 +683,13 @@ def random_effect(
 # Python's ``max``/``min`` theirs (``_pmax``, ``_pmin``), a sum over axles numpy's pairwise order
 # (``_np_sum``), and ``a[idx] += v`` numpy's buffered fancy assignment (the last write wins).
 # numba is a compiler, not code of the project: the generator still shares nothing with it.
-# ``exp`` and ``log`` are the C library's in the kernel. numpy's array versions gave the same bits
-# on the AVX2 machine where the two were compared (scripts/independent_equivalence.py); on an
-# AVX-512 machine numpy uses its own vector routines, which may differ in the last bit, so the
-# numpy version's traces depended on the CPU and the compiled one's do not.
+# Every exp, log, pow and sin of a trace is the C library's: in the kernels (numba calls it), and
+# in the set-up through ``math`` and ``_roughness``, never numpy's array or scalar versions. On an
+# AVX-512 machine numpy uses its own vector routines (numpy 2.4: its ``X86_V4`` dispatch), which
+# differ from the C library's in the last bit on a few per cent of arguments (and on an AVX2
+# machine gave the same bits), so a trace made with them depended on the CPU. With the C library
+# it depends on the C library alone (tests/test_independent_traces.py's frozen digests, checked
+# on an AVX2 and an AVX-512 machine).
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -707,6 +710,18 @@ def _pmax(a, b):  # Python's max(a, b): the first unless the second is larger
 @njit(cache=True, error_model="numpy", inline="always")
 def _pmin(a, b):  # Python's min(a, b): the first unless the second is smaller
     return b if b < a else a
+
+
+@njit(cache=True, error_model="numpy")
+def _roughness(xi_cells, wavelengths, phases):
+    """``sum_k sin(2 pi xi / lambda_k + phase_k)`` over the cells, the terms added in order,
+    each sine the C library's."""
+    rough = np.zeros(xi_cells.shape[0])
+    two_pi = 2 * np.pi
+    for k in range(wavelengths.shape[0]):
+        for c in range(xi_cells.shape[0]):
+            rough[c] += math.sin(two_pi * xi_cells[c] / wavelengths[k] + phases[k])
+    return rough
 
 
 @njit(cache=True, error_model="numpy")
@@ -1088,8 +1103,11 @@ def simulate_record(
     xi_cells = grid_lo + GRID_DX * (np.arange(n_cells) + 0.5)
     rough = np.zeros(n_cells)
     if sc.adhesion_roughness > 0:
-        for lam, ph in zip(sc.roughness_wavelengths_m, sc.roughness_phases, strict=True):
-            rough += np.sin(2 * np.pi * xi_cells / lam + ph)
+        lams = np.asarray(sc.roughness_wavelengths_m, dtype=float)
+        phases = np.asarray(sc.roughness_phases, dtype=float)
+        if lams.shape != phases.shape:
+            raise ValueError("roughness_wavelengths_m and roughness_phases differ in length")
+        rough = _roughness(xi_cells, lams, phases)
         rough *= sc.adhesion_roughness / math.sqrt(len(sc.roughness_wavelengths_m) / 2)
     pos_fac = np.ones(n_cells)
     for pos, fac in tr["positions"]:
@@ -1097,14 +1115,13 @@ def simulate_record(
     mu_cont_g = sc.mu_contaminated * (1.0 + rough) * pos_fac / g_pk
     mu_clean_g = (sc.mu_contaminated if good else sc.mu_clean) * pos_fac / g_pk
     e_grid = np.zeros(n_cells)
-    qpow = (1.0 - sc.rolling_clean_fraction) ** np.arange(n)
+    qpow = np.array([(1.0 - sc.rolling_clean_fraction) ** i for i in range(n)])  # C pow
     inv_ec = 1.0 / sc.clean_energy_J_per_m
     axle_fac = tr["axle_factor"]
 
     # pressure dynamics coefficients per substep (j = 1..N_SUB)
-    jj = np.arange(1, N_SUB + 1)[:, None]
-    dec_fill = np.exp(-jj * SUB_DT / sc.tau_fill_s)
-    dec_vent = np.exp(-jj * SUB_DT / sc.tau_vent_s)
+    dec_fill = np.array([[math.exp(-j * SUB_DT / sc.tau_fill_s)] for j in range(1, N_SUB + 1)])
+    dec_vent = np.array([[math.exp(-j * SUB_DT / sc.tau_vent_s)] for j in range(1, N_SUB + 1)])
     lag = tr["pressure_lag"]
     lag_sub = lag / SUB_DT
     p_hist = np.zeros((n_max * N_SUB + 1, n)) if lag > 0 else None
