@@ -19,13 +19,19 @@ from wsp_env.core.config import RailConfig, VehicleConfig, check_number, check_o
 from wsp_env.physics import layout as L
 from wsp_env.physics.adhesion import LAW_NAMES, REC_BASIS_NAMES, tustin_second_order
 from wsp_env.physics.brake import decay_factor, demand_pressures
-from wsp_env.physics.contact import kalker_longitudinal_stiffness_N
+from wsp_env.physics.contact import STIFFNESS_LOAD_EXPONENT, kalker_longitudinal_stiffness_N
 from wsp_env.physics.integrator import step_batch
+from wsp_env.physics.libm import elementwise
 from wsp_env.physics.rail import friction_level, reset_field
 from wsp_env.physics.vehicle import Bogie, Car, TrainLayout
 
 KMH = 1.0 / 3.6
 G = 9.80665
+
+
+def _load_power(ratio: float) -> float:
+    """The creep stiffness's load scaling ``(Q / Q_ref)^(2/3)`` (``STIFFNESS_LOAD_EXPONENT``)."""
+    return ratio**STIFFNESS_LOAD_EXPONENT
 
 
 @dataclass(frozen=True)
@@ -305,7 +311,8 @@ class TrainSim:
         ap[:, L.AP_INERTIA] = veh.wheelset_inertia_kgm2
         ap[:, L.AP_N_STATIC] = static
         ap[:, L.AP_K_TRANSFER] = va.transfer_body * f + va.transfer_rest
-        ap[:, L.AP_STIFF] = va.stiffness_ref_N * (static / va.load_ref_N) ** (2.0 / 3.0)
+        # Q^(2/3) by the C library's pow (physics.libm: not numpy's, which depends on the CPU)
+        ap[:, L.AP_STIFF] = va.stiffness_ref_N * elementwise(_load_power, static / va.load_ref_N)
         ap[:, L.AP_BRAKE_GAIN] = va.brake_gain
         ap[:, L.AP_P_THRESH] = va.p_threshold_bar
         ap[:, L.AP_OFFSET] = va.offsets_m

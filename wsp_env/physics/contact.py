@@ -21,6 +21,8 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from wsp_env.physics.libm import elementwise
+
 __all__ = [
     "STIFFNESS_LOAD_EXPONENT",
     "hertz_coefficients",
@@ -45,8 +47,10 @@ STIFFNESS_LOAD_EXPONENT: float = 2.0 / 3.0
 _HERTZ_THETA_DEG = np.array([10.0, 20.0, 30.0, 40.0, 50.0, 60.0, 70.0, 80.0, 90.0])
 _HERTZ_M = np.array([6.612, 3.778, 2.731, 2.136, 1.754, 1.486, 1.284, 1.128, 1.000])
 _HERTZ_N = np.array([0.319, 0.408, 0.493, 0.567, 0.641, 0.717, 0.802, 0.893, 1.000])
-_LOG_HERTZ_M = np.log(_HERTZ_M)
-_LOG_HERTZ_N = np.log(_HERTZ_N)
+
+
+_LOG_HERTZ_M = elementwise(math.log, _HERTZ_M)
+_LOG_HERTZ_N = elementwise(math.log, _HERTZ_N)
 
 # --------------------------------------------------------------------------------------------
 # Kalker (1967) creepage coefficient c11, columns nu = 0, 0.25, 0.5, rows g = 0.1 ... 1.0.
@@ -128,8 +132,8 @@ def hertz_coefficients(theta_deg: ArrayLike) -> tuple[FloatArray, FloatArray]:
             "theta must lie in [10, 90] degrees (range of the Hertz m/n table); "
             f"got {theta_deg!r}. The contact ellipse is too elongated for this table."
         )
-    m = np.exp(np.interp(theta, _HERTZ_THETA_DEG, _LOG_HERTZ_M))
-    n = np.exp(np.interp(theta, _HERTZ_THETA_DEG, _LOG_HERTZ_N))
+    m = elementwise(math.exp, np.interp(theta, _HERTZ_THETA_DEG, _LOG_HERTZ_M))
+    n = elementwise(math.exp, np.interp(theta, _HERTZ_THETA_DEG, _LOG_HERTZ_N))
     return m, n
 
 
@@ -181,9 +185,9 @@ def hertz_semi_axes(
             "(line contact: no Hertz ellipse)"
         )
     cos_theta = np.clip(np.abs(B - A) / (A + B), 0.0, 1.0)
-    theta_deg = np.degrees(np.arccos(cos_theta))
+    theta_deg = np.degrees(elementwise(math.acos, cos_theta))
     m, n = hertz_coefficients(theta_deg)
-    c = np.cbrt(3.0 * Q * (1.0 - nu**2) / (2.0 * E * (A + B)))
+    c = elementwise(math.cbrt, 3.0 * Q * (1.0 - nu**2) / (2.0 * E * (A + B)))
     rolling_is_major = A <= B
     a = np.where(rolling_is_major, m, n) * c
     b = np.where(rolling_is_major, n, m) * c
