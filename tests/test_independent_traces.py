@@ -410,3 +410,16 @@ def test_a_negative_valve_delay_is_refused():
     sc = dataclasses.replace(ind.random_scenario(np.random.default_rng(0)), valve_delay_cycles=-1)
     with pytest.raises(ValueError, match="valve_delay_cycles must be >= 0, got -1"):
         ind.simulate_record(sc)
+
+
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [("demand_ramp_s", 0.0), ("mu_speed_kmh", 0.0), ("tau_fill_s", -0.1), ("creep_c3", math.nan),
+     ("gps_rate_hz", 0.0), ("speed_kmh", math.inf)],
+)  # fmt: skip
+def test_a_hand_made_scenario_with_a_zero_divisor_is_refused(field, value):
+    """``random_scenario`` never draws these; a scenario edited by hand could, and the compiled
+    loop would run on to inf and NaN (its error model is numpy's) instead of failing."""
+    sc = dataclasses.replace(ind.random_scenario(np.random.default_rng(0)), **{field: value})
+    with pytest.raises(ValueError, match=f"{field} must be > 0 and finite, got {value}"):
+        ind.generate(sc)

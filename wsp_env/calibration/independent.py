@@ -1053,6 +1053,11 @@ def _cycles(
 # ----------------------------------------------------------------------------------------
 # physics + BCU
 # ----------------------------------------------------------------------------------------
+# scenario fields a stop divides by or scales with (``clean_energy_J_per_m`` may be inf: a rail
+# that never cleans); random_scenario draws them positive, a hand-made scenario may not
+_POSITIVE = ("speed_kmh", "wheel_radius_m", "wheelset_inertia_kgm2", "mu_speed_kmh", "creep_c2",
+             "creep_c3", "clean_energy_J_per_m", "p_max_bar", "demand_ramp_s", "tau_fill_s",
+             "tau_vent_s", "log_period_s", "gps_rate_hz", "max_duration_s")  # fmt: skip
 
 
 def simulate_record(
@@ -1062,6 +1067,10 @@ def simulate_record(
     ``generate`` logs from, and ``scripts/independent_equivalence.py`` compares across versions."""
     if sc.valve_delay_cycles < 0:  # the compiled loop indexes its command queue by it
         raise ValueError(f"valve_delay_cycles must be >= 0, got {sc.valve_delay_cycles}")
+    for name in _POSITIVE:  # divisors and scales: 0 or NaN would run on to inf/NaN silently
+        value = getattr(sc, name)
+        if not (value > 0.0 and (math.isfinite(value) or name == "clean_energy_J_per_m")):
+            raise ValueError(f"{name} must be > 0 and finite, got {value}")
     seed = sc.seed if seed is None else seed
     ss = np.random.SeedSequence(seed)
     rng_bcu = np.random.default_rng(ss.spawn(1)[0])
