@@ -1053,11 +1053,22 @@ def _cycles(
 # ----------------------------------------------------------------------------------------
 # physics + BCU
 # ----------------------------------------------------------------------------------------
-# scenario fields a stop divides by or scales with (``clean_energy_J_per_m`` may be inf: a rail
-# that never cleans); random_scenario draws them positive, a hand-made scenario may not
-_POSITIVE = ("speed_kmh", "wheel_radius_m", "wheelset_inertia_kgm2", "mu_speed_kmh", "creep_c2",
-             "creep_c3", "clean_energy_J_per_m", "p_max_bar", "demand_ramp_s", "tau_fill_s",
-             "tau_vent_s", "log_period_s", "gps_rate_hz", "max_duration_s")  # fmt: skip
+# scenario fields a stop divides by or scales with, and what each may be: random_scenario draws
+# them within these, a hand-made scenario may not. inf: ``mu_speed_kmh`` no fall of the adhesion
+# with speed, ``clean_energy_J_per_m`` a rail that never cleans; 0: ``demand_ramp_s`` a step,
+# ``tau_fill_s``/``tau_vent_s`` a cylinder that follows at once
+_FIELD_RULES = {
+    **dict.fromkeys(("speed_kmh", "wheel_radius_m", "wheelset_inertia_kgm2", "creep_c2",
+                     "creep_c3", "p_max_bar", "log_period_s", "gps_rate_hz", "max_duration_s"),
+                    "> 0"),
+    **dict.fromkeys(("mu_speed_kmh", "clean_energy_J_per_m"), "> 0, may be inf"),
+    **dict.fromkeys(("demand_ramp_s", "tau_fill_s", "tau_vent_s"), ">= 0"),
+}  # fmt: skip
+
+
+def _decay(t_s: float, tau_s: float) -> float:
+    """``exp(-t / tau)`` by the C library, 0.0 for ``tau`` 0."""
+    return math.exp(-t_s / tau_s) if tau_s > 0.0 else 0.0
 
 
 def simulate_record(
@@ -1067,10 +1078,12 @@ def simulate_record(
     ``generate`` logs from, and ``scripts/independent_equivalence.py`` compares across versions."""
     if sc.valve_delay_cycles < 0:  # the compiled loop indexes its command queue by it
         raise ValueError(f"valve_delay_cycles must be >= 0, got {sc.valve_delay_cycles}")
-    for name in _POSITIVE:  # divisors and scales: 0 or NaN would run on to inf/NaN silently
+    for name, rule in _FIELD_RULES.items():  # 0, NaN or inf would run on to NaN, or stop nowhere
         value = getattr(sc, name)
-        if not (value > 0.0 and (math.isfinite(value) or name == "clean_energy_J_per_m")):
-            raise ValueError(f"{name} must be > 0 and finite, got {value}")
+        ok = value > 0.0 if rule != ">= 0" else value >= 0.0
+        if not (ok and (math.isfinite(value) or rule == "> 0, may be inf")):
+            raise ValueError(f"{name} must be {rule}{'' if 'inf' in rule else ' and finite'}, "
+                             f"got {value}")  # fmt: skip
     seed = sc.seed if seed is None else seed
     ss = np.random.SeedSequence(seed)
     rng_bcu = np.random.default_rng(ss.spawn(1)[0])
@@ -1129,8 +1142,9 @@ def simulate_record(
     axle_fac = tr["axle_factor"]
 
     # pressure dynamics coefficients per substep (j = 1..N_SUB)
-    dec_fill = np.array([[math.exp(-j * SUB_DT / sc.tau_fill_s)] for j in range(1, N_SUB + 1)])
-    dec_vent = np.array([[math.exp(-j * SUB_DT / sc.tau_vent_s)] for j in range(1, N_SUB + 1)])
+    # exp(-t / tau), 0 for tau 0 (exp(-inf): the numpy version's value, an instant cylinder)
+    dec_fill = np.array([[_decay(j * SUB_DT, sc.tau_fill_s)] for j in range(1, N_SUB + 1)])
+    dec_vent = np.array([[_decay(j * SUB_DT, sc.tau_vent_s)] for j in range(1, N_SUB + 1)])
     lag = tr["pressure_lag"]
     lag_sub = lag / SUB_DT
     p_hist = np.zeros((n_max * N_SUB + 1, n)) if lag > 0 else None
