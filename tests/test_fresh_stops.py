@@ -223,3 +223,26 @@ def test_policy_targets_bins_every_decision_by_the_train_speed(capsys):
     assert pt.main(["--policy", "target:3", "--teacher", str(root / "ppo_uic_z1.yaml")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "no pretrain.teacher_targets_kmh" in err
+
+
+def test_an_axle_profile_holds_its_leading_axles_higher():
+    """``scripts/axle_profile.py``: ``pBBB_LLL_N`` through ``module:callable``; with the lead
+    target equal to the base it is the constant target, run for run; otherwise the first N
+    valves hold the lead target and the stops differ. A bad name is refused."""
+    import axle_profile
+
+    from wsp_env.policy import make_policy
+
+    seeds = fresh_stops.rail_seeds("uic_z1", "wheels+accel", "soap", 12)[:3]
+    specs = ["target:3.5", "axle_profile:p35_35_2", "axle_profile:p35_100_2"]
+    got = fresh_stops.run("uic_z1", "wheels+accel", seeds, specs)
+    runs = {spec: [{k: v for k, v in r.items() if k != "policy"} for r in got[spec]]
+            for spec in specs}  # fmt: skip
+    assert runs["axle_profile:p35_35_2"] == runs["target:3.5"]
+    assert runs["axle_profile:p35_100_2"] != runs["target:3.5"]
+    policy = make_policy("axle_profile:p35_100_2")
+    assert policy.name == "axle_profile_3.5_10x2"
+    with pytest.raises(AttributeError, match="pBBB_LLL_N"):
+        axle_profile.p35_100  # noqa: B018
+    with pytest.raises(ValueError, match="policy: axle_profile:q1: 'axle_profile' has no"):
+        make_policy("axle_profile:q1")
