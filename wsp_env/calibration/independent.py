@@ -686,10 +686,10 @@ def random_effect(
 # Every exp, log, pow and sin of a trace is the C library's: in the kernels (numba calls it), and
 # in the set-up through ``math`` and ``_roughness``, never numpy's array or scalar versions. On an
 # AVX-512 machine numpy uses its own vector routines (numpy 2.4: its ``X86_V4`` dispatch), which
-# differ from the C library's in the last bit on a few per cent of arguments (and on an AVX2
-# machine gave the same bits), so a trace made with them depended on the CPU. With the C library
-# it depends on the C library alone (tests/test_independent_traces.py's frozen digests, checked
-# on an AVX2 and an AVX-512 machine).
+# differ from the C library's in the last bit on some arguments (on an AVX2 machine numpy calls
+# the C library), so a trace made with them depended on the CPU. With the C library it depends on
+# the C library alone (tests/test_cpu_independence.py; test_independent_traces.py's frozen
+# digests, met on an AVX2 and an AVX-512 machine).
 
 
 @njit(cache=True, error_model="numpy", inline="always")

@@ -47,8 +47,6 @@ STIFFNESS_LOAD_EXPONENT: float = 2.0 / 3.0
 _HERTZ_THETA_DEG = np.array([10.0, 20.0, 30.0, 40.0, 50.0, 60.0, 70.0, 80.0, 90.0])
 _HERTZ_M = np.array([6.612, 3.778, 2.731, 2.136, 1.754, 1.486, 1.284, 1.128, 1.000])
 _HERTZ_N = np.array([0.319, 0.408, 0.493, 0.567, 0.641, 0.717, 0.802, 0.893, 1.000])
-
-
 _LOG_HERTZ_M = elementwise(math.log, _HERTZ_M)
 _LOG_HERTZ_N = elementwise(math.log, _HERTZ_N)
 

@@ -4,13 +4,12 @@ numpy's ufuncs ``exp``, ``log``, ``power``, ``arccos``, ``cbrt``, ``tanh``, ``ar
 and ``log1p`` use numpy's own vector routines where the CPU has them (numpy 2.4: its ``X86_V4``,
 AVX-512, dispatch), and those differ from the C library's in the last bit (on one AVX-512 host:
 5 % of arguments for exp and power, half for cbrt); on an AVX2 CPU numpy calls the C library for
-all of them but tanh. A last bit that differs in one axle's
-creep stiffness moves a stop by up to metres where a valve's threshold is crossed one period
-earlier or later. The compiled kernels call the C library's functions (numba); what the set-up
-computes before them goes through :func:`elementwise`, so a run's result depends on its seed and
-the C library, not on numpy's choice of code for the CPU (``tests/test_cpu_independence.py``;
-docs/physics.md, "Results across CPUs"). Sums and products are IEEE operations, the same on
-every CPU.
+all of them but tanh. A last bit that differs in one axle's creep stiffness moves a stop by up to
+metres where a valve's threshold is crossed one period earlier or later. The compiled kernels
+call the C library's functions (numba); what the set-up computes before them goes through
+:func:`elementwise`, so a run's result depends on its seed and the C library, not on numpy's
+choice of code for the CPU (``tests/test_cpu_independence.py``; docs/physics.md, "Results across
+CPUs"). Sums and products are IEEE operations, the same on every CPU.
 """
 
 from __future__ import annotations
