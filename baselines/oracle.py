@@ -206,20 +206,36 @@ class SlipTargetTeacher:
     simulator knows and no sensor measures (``RAIL_TARGETS_KMH``; a rail not in the table:
     ``DEFAULT_TARGET_KMH``). A student must infer the rail from how its wheels behave.
 
+    ``creep`` (rail -> a fraction of the reference speed; None or a rail not in it: none) makes
+    a rail's target a **creep schedule**: ``min(T, max(creep 3.6 v_ref, floor_kmh))`` km/h, the
+    rail's target ``T`` until the creep falls under it, then that creep of the reference speed
+    the slip-target loop tracks (``SlipTargetLoop.reference_mps``), never under ``floor_kmh``:
+    a slip near the adhesion peak, which lies at a creepage, as the train slows
+    (``docs/training_log.md``, "The lock guard, and a creep schedule for the Régiolis's leaves
+    teacher").
+
     ``targets_kmh()`` gives the targets (``(n_envs, n_valves)``, clipped to the core's range);
     ``act`` the environment's actions for them, ``2 (s* - s_min) / (s_max - s_min) - 1``."""
 
     name = "oracle_target_rail"
     privileged = True
 
-    def __init__(self, targets_kmh: dict[str, float] | None = None) -> None:
+    def __init__(
+        self,
+        targets_kmh: dict[str, float] | None = None,
+        creep: dict[str, float] | None = None,
+        floor_kmh: float = 0.5,
+    ) -> None:
         self.table = dict(RAIL_TARGETS_KMH if targets_kmh is None else targets_kmh)
+        self.creep = dict(creep or {})
+        self.floor_kmh = float(floor_kmh)
 
     def bind(self, core: Any) -> None:
         self.core = core
         self.lo = float(getattr(core, "slip_target_min_kmh", 0.5))
         self.hi = float(getattr(core, "slip_target_max_kmh", 8.0))
         self._rail = np.full(core.n_envs, DEFAULT_TARGET_KMH)
+        self._creep = np.zeros(core.n_envs)  # 0: a constant target
 
     def reset(self, env_ids: np.ndarray) -> None:
         setups = self.core.sim.setups
@@ -227,10 +243,20 @@ class SlipTargetTeacher:
             s = setups[e]
             name = s.rail_name if s is not None else ""
             self._rail[e] = self.table.get(name, DEFAULT_TARGET_KMH)
+            self._creep[e] = self.creep.get(name, 0.0)
 
-    def targets_kmh(self) -> np.ndarray:
-        """Each valve's target (km/h of measured slip), within the core's range."""
-        t = np.clip(self._rail, self.lo, self.hi)
+    def targets_kmh(self, v_ref_mps: np.ndarray | None = None) -> np.ndarray:
+        """Each valve's target (km/h of measured slip), within the core's range; a rail with a
+        creep schedule reads the reference speed ``v_ref_mps`` (``(n_envs,)``; None: the
+        environment's slip-target loop's, ``SlipTargetLoop.reference_mps``)."""
+        t = self._rail
+        if self.creep and (self._creep > 0.0).any():
+            if v_ref_mps is None:
+                core = self.core
+                v_ref_mps = core.loop.reference_mps(core.obs[:, : core.kernel_obs_dim])
+            sched = np.minimum(t, np.maximum(3.6 * self._creep * v_ref_mps, self.floor_kmh))
+            t = np.where(self._creep > 0.0, sched, t)
+        t = np.clip(t, self.lo, self.hi)
         return np.repeat(t[:, None], self.core.n_valves, axis=1)
 
     def act(self, obs: np.ndarray) -> np.ndarray:
@@ -258,4 +284,13 @@ class SlipTargetOracle(SlipTargetPolicy):
     def reset(self, env_ids: np.ndarray) -> None:
         super().reset(env_ids)
         self.teacher.reset(env_ids)
-        self.target[env_ids] = self.teacher.targets_kmh()[env_ids]
+        if not self.teacher.creep:
+            self.target[env_ids] = self.teacher.targets_kmh()[env_ids]
+
+    def act(self, obs: np.ndarray) -> np.ndarray:
+        if not self.teacher.creep:
+            return super().act(obs)
+        kobs = obs[:, : self.width]
+        self.loop.advance(kobs)  # a creep schedule reads this period's reference
+        self.target[...] = self.teacher.targets_kmh(self.loop.reference_mps(kobs))
+        return self.loop.command(kobs, self.target)

@@ -116,6 +116,14 @@ what the sensor model measures) — exactly as the classical WSP (``classical.py
   and of the estimator's reference for the rest of the stop (``_calibrate``): with the
   benchmark's +-0.5 % a 2 km/h target's leaves watchdog stops fall from 7 to 1 of 593 fresh
   stops (``docs/training_log.md``, "The wheel-scale calibration").
+* **the lock guard** (``lock_guard``; off by default): on a patchy leaves rail at low speed a
+  wheel braked at the full demand on a clean patch locks within two periods when it meets a
+  contaminated one, and stays locked while its cylinder vents (0.32 s from 3.8 bar on the
+  Régiolis: the longest locks of every controller there). Below 15 km/h, on a stop whose
+  reference has slowed at under 0.85 m/s^2 on average after a wheel slipped, each request is
+  capped at 0.8 of the demand (``_guard``): the Régiolis student's longest lock on its
+  development stops 0.32 → 0.28 s for 0.0007 of its mean stop ratio (``docs/training_log.md``,
+  "The lock guard, and a creep schedule for the Régiolis's leaves teacher").
 
 The commands are continuous valve actions (``2 f - 1``), so the loop can drive any continuous
 environment from outside (``SlipTargetPolicy``: a constant target) and gives, bit for bit, the
@@ -169,6 +177,18 @@ ONSET_MIN_S = 0.2
 # model's scale errors are at most 0.1)
 CAL_MIN_SPEED_MPS = 10.0 / 3.6
 CAL_MAX_FACTOR = 0.1
+# the lock guard (``lock_guard``): below this reference speed (km/h), on a stop where a wheel has
+# slipped beyond the estimator's working band and the reference's deceleration, averaged over
+# ``LOCK_GUARD_TAU_S``, is under ``LOCK_GUARD_DECEL_MPS2`` (a low-adhesion rail: leaves, oil; a
+# dry or wet rail brakes at 1 m/s^2 and more at the full demand), every valve asks for at most
+# ``LOCK_GUARD_FRACTION`` of the demand. Chosen on the Régiolis's development stops
+# (``docs/training_log.md``, "The lock guard, and a creep schedule for the Régiolis's leaves
+# teacher")
+DEFAULT_LOCK_GUARD = False
+LOCK_GUARD_SPEED_KMH = 15.0
+LOCK_GUARD_FRACTION = 0.8
+LOCK_GUARD_DECEL_MPS2 = 0.85
+LOCK_GUARD_TAU_S = 2.0
 # the creep cap's default floor: it never asks for less than this (km/h of measured slip; a
 # lower target is kept); the environment's loop always has it, a probe may lower it
 MAX_CREEP_FLOOR_KMH = 2.0
@@ -271,6 +291,14 @@ def check_scale_calibration(scale_calibration: Any) -> bool:
     return bool(scale_calibration)
 
 
+def check_lock_guard(lock_guard: Any) -> bool:
+    """The lock guard's switch as a bool, or a one-line ``ConfigError`` naming the environment
+    argument ``slip_target_lock_guard`` (true or false)."""
+    if not isinstance(lock_guard, (bool, np.bool_)):
+        raise ConfigError(f"slip_target_lock_guard: must be true or false, got {lock_guard!r}")
+    return bool(lock_guard)
+
+
 class SlipTargetLoop(ArrayState, PeriodicRelease):
     """Valve commands that track per-valve target sliding speeds (module docstring). ``wsp``:
     the classical WSP's thresholds it reuses (recovery, minimum speed, periodic release); None:
@@ -297,7 +325,8 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
     holds the estimator's up (``_correct_drift``); ``scale_calibration``: each wheel-speed
     reading's scale, relative
     to the wheels' mean, read while every wheel rolls free at the stop's start and divided out
-    (``_calibrate``; either tier)."""
+    (``_calibrate``; either tier); ``lock_guard``: at low speed on a low-adhesion stop, every
+    valve's request capped under the demand (``LOCK_GUARD_*``; module docstring)."""
 
     name = "slip_target_loop"
     privileged = False
@@ -315,6 +344,7 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         scale_calibration: bool = DEFAULT_SCALE_CALIBRATION,
         onset_two_sided: bool = DEFAULT_ONSET_TWO_SIDED,
         creep_floor_kmh: float = MAX_CREEP_FLOOR_KMH,
+        lock_guard: bool = DEFAULT_LOCK_GUARD,
     ) -> None:
         self.wsp_given = wsp  # None: the bound core's tier's thresholds (``bind``)
         self.cfg = wsp or WSPConfig()
@@ -327,6 +357,7 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         self.scale_calibration = check_scale_calibration(scale_calibration)
         self.onset_two_sided = check_onset_two_sided(onset_two_sided, self.onset_drift)
         self.creep_floor_kmh = check_number(creep_floor_kmh, "creep_floor_kmh", ge=0.0, le=30.0)
+        self.lock_guard = check_lock_guard(lock_guard)
 
     def bind(self, core: Any) -> None:
         """Attach to a ``BrakingCore``: its scales, valve map and batch size."""
@@ -413,6 +444,12 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         # (m/s): its anchor rule's inputs (``_correct_drift``)
         self.kernel_ref = np.zeros(n)
         self.kernel_wheels = np.zeros((n, na))
+        # the lock guard (``lock_guard``): a wheel slipped beyond the working band since the
+        # stop began; the reference's deceleration averaged over ``LOCK_GUARD_TAU_S`` (m/s^2);
+        # whether the guard caps the requests this period (``advance``)
+        self.guard_slipped = np.zeros(n, dtype=bool)
+        self.guard_decel = np.zeros(n)
+        self.guard_on = np.zeros(n, dtype=bool)
 
     def reset(self, env_ids: np.ndarray) -> None:
         """Environments ``env_ids`` start a new stop."""
@@ -443,6 +480,9 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         self.cal_ref_factor[env_ids] = 1.0
         self.kernel_ref[env_ids] = 0.0
         self.kernel_wheels[env_ids] = 0.0
+        self.guard_slipped[env_ids] = False
+        self.guard_decel[env_ids] = 0.0
+        self.guard_on[env_ids] = False
 
     # bound once (``bind``); every other array evolves (``state_dict``)
     _CONSTANT = frozenset({"valve_of_axle", "valve_starts", "_rows", "free_share", "always"})
@@ -661,6 +701,39 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
             # last period, or a wheel slips beyond the estimator's working band now
             allowed = self.working | self._slips(v_ref, v)
         self._release_step(age, decel, dt, allowed, self.vent)
+        if self.lock_guard:
+            self._guard(v_ref, v)
+
+    def _guard(self, v_ref: np.ndarray, v: np.ndarray) -> None:
+        """The lock guard's state for this period (``lock_guard``): on a patchy low-adhesion rail
+        at low speed a wheel that runs at the full demand from a clean patch onto a
+        contaminated one locks within two periods (its inertia is small there) and stays
+        locked for as long as its cylinder takes to vent to what the patch holds: 0.3 s from
+        the Régiolis's 3.8 bar at its 10 bar/s. So below ``LOCK_GUARD_SPEED_KMH``, on a stop
+        where a wheel has slipped beyond the working band and the reference has slowed at
+        under ``LOCK_GUARD_DECEL_MPS2`` on average (a first-order average over
+        ``LOCK_GUARD_TAU_S`` of the period's fall, ``decel_ref``), ``command`` asks for at most
+        ``LOCK_GUARD_FRACTION`` of the demand; never below the minimum speed, where the full
+        demand is the rule."""
+        self.guard_slipped |= self._slips(v_ref, v)
+        self.guard_decel += (self.dt / LOCK_GUARD_TAU_S) * (self.decel_ref - self.guard_decel)
+        self.guard_on[...] = (
+            self.guard_slipped
+            & (v_ref < LOCK_GUARD_SPEED_KMH / 3.6)
+            & (self.guard_decel < LOCK_GUARD_DECEL_MPS2)
+        )
+
+    def reference_mps(self, obs: np.ndarray) -> np.ndarray:
+        """The reference speed (m/s, ``(n_envs,)``) the loop tracks the slip against on the
+        kernel's observation ``obs``, on the state as ``advance`` left it: with the drift
+        correction its corrected reference, else the estimator's, on the calibrated scale with
+        the wheel-scale calibration (as ``command`` reads it)."""
+        if self.drift_correction:
+            return self.v_ref.copy()
+        ref = obs[:, 4 * self.n_axles + 1].astype(np.float64)
+        if self.scale_calibration:
+            ref = ref * self.cal_ref_factor
+        return ref * self.v_scale
 
     def command(self, obs: np.ndarray, target_kmh: np.ndarray) -> np.ndarray:
         """Valve actions ``(n_envs, n_valves)`` (float64 in [-1, 1], the continuous action
@@ -699,6 +772,9 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         self.working[...] = (frac < 1.0 - 1e-6).any(axis=1) & ~slow  # in place
         frac[self.vent] = 0.0
         frac[slow] = 1.0
+        if self.lock_guard:  # at most the guard's share of the demand (``_guard``)
+            guard = self.guard_on & ~slow
+            frac[guard] = np.minimum(frac[guard], LOCK_GUARD_FRACTION)
         valve = np.minimum.reduceat(frac, self.valve_starts, axis=1)
         return 2.0 * valve - 1.0
 
@@ -714,7 +790,7 @@ def loop_suffix(loop: SlipTargetLoop) -> str:
     floor), ``_drift`` for the drift correction,
     ``_onset`` for its onset reading (``_onset2`` two-sided), ``_pgain<gain>x<floor>`` for a
     gain scaled by the pressure held, ``_gain<gain>`` for another fixed gain, ``_cal`` for the
-    wheel-scale calibration
+    wheel-scale calibration, ``_guard`` for the lock guard
     (``""`` for the default loop), so that two loops never share a name."""
     gate = "" if loop.release == DEFAULT_RELEASE else f"_{loop.release}"
     floor = "" if loop.creep_floor_kmh == MAX_CREEP_FLOOR_KMH else f"at{loop.creep_floor_kmh:g}"
@@ -728,7 +804,8 @@ def loop_suffix(loop: SlipTargetLoop) -> str:
     drift = ("_drift" if loop.drift_correction else "") + ("_onset" if loop.onset_drift else "")
     drift += "2" if loop.onset_two_sided else ""  # the onset reading's both senses
     cal = "_cal" if loop.scale_calibration else ""
-    return gate + cap + drift + scaled + cal
+    guard = "_guard" if loop.lock_guard else ""
+    return gate + cap + drift + scaled + cal + guard
 
 
 class SlipTargetPolicy:

@@ -18,8 +18,9 @@ scaled by the pressure held, never below F of it: ``target:2:drift:0.8x0.25``), 
 ``:creepC`` or ``:creepC@F`` for the loop's creep cap C (a fraction of the reference speed)
 with its floor F km/h (2 by default; ``target:2:creep0.02@0.5`` asks for 2 km/h above 100 km/h,
 2 % of the reference speed below, never under 0.5 km/h: a creep schedule), each with
-``:cal`` last for the loop's wheel-scale calibration (either tier: ``target:2:cal``,
-``target:2:drift:onset:cal``), or anything
+``:cal`` for the loop's wheel-scale calibration (either tier: ``target:2:cal``,
+``target:2:drift:onset:cal``) and ``:guard`` last for its lock guard
+(``target:1:drift:onset2:cal:guard``), or anything
 ``wsp-env benchmark --policy`` takes (a model file, a shipped policy's name). ``--json`` keeps
 every run (written whole or not at all). ``--watchdog-floor A`` runs every policy under a
 minimum-deceleration supervision floor of A m/s^2 instead of the benchmark's (a probe of the
@@ -104,11 +105,13 @@ def build_policy(spec: str, tier: str) -> Any:
     the loop's drift correction, ``target:X[:drift]:GxF`` with its gain G per km/h scaled by
     the pressure held, never below F of it (``slip_target.parse_pressure_gain``),
     ``:creepC[@F]`` with the creep cap C and its floor F km/h (``parse_creep``), ``:cal``
-    last with the wheel-scale calibration; anything else
+    with the wheel-scale calibration, ``:guard`` last with the lock guard; anything else
     as ``wsp-env benchmark --policy`` builds it."""
     if spec.startswith("target:"):
         value, _, option = spec.removeprefix("target:").partition(":")
         items = option.split(":") if option else []
+        guard = items[-1:] == ["guard"]
+        items = items[:-1] if guard else items
         cal = items[-1:] == ["cal"]
         items = items[:-1] if cal else items
         creep, creep_floor = DEFAULT_MAX_CREEP, MAX_CREEP_FLOOR_KMH
@@ -121,7 +124,8 @@ def build_policy(spec: str, tier: str) -> Any:
         rest = rest[1:] if onset else rest
         if len(rest) > 1 or (rest and "x" not in rest[0]):
             raise ValueError(
-                f"--policy {spec}: target:X[:drift[:onset|:onset2]][:GAINxFLOOR][:creepC[@F]][:cal]"
+                f"--policy {spec}: "
+                "target:X[:drift[:onset|:onset2]][:GAINxFLOOR][:creepC[@F]][:cal][:guard]"
             )
         gain, floor = parse_pressure_gain(rest[0] if rest else "off", f"--policy {spec}")
         if drift and tier != "wheels+accel":
@@ -136,7 +140,7 @@ def build_policy(spec: str, tier: str) -> Any:
         loop = SlipTargetLoop(drift_correction=drift, gain_per_kmh=gain, gain_scale_floor=floor,
                               onset_drift=onset, scale_calibration=cal,
                               onset_two_sided=two_sided, max_creep=creep,
-                              creep_floor_kmh=creep_floor)  # fmt: skip
+                              creep_floor_kmh=creep_floor, lock_guard=guard)  # fmt: skip
         return SlipTargetPolicy(kmh, loop)
     return make_policy(spec, tier=tier)
 

@@ -5,7 +5,8 @@ cap (``--max-creep``: ``slip_target_max_creep``, 0-1, 0 no cap), the drift corre
 ``--onset-drift on|off``, its onset reading, ``slip_target_onset_drift``, and
 ``--onset-two-sided on|off``, that reading's other sense, ``slip_target_onset_two_sided``), the
 wheel-scale
-calibration (``--scale-calibration on|off``: ``slip_target_scale_calibration``) and
+calibration (``--scale-calibration on|off``: ``slip_target_scale_calibration``), the lock
+guard (``--lock-guard on|off``: ``slip_target_lock_guard``) and
 the gain (``--pressure-gain off|GxF``: ``slip_target_gain_per_kmh`` and
 ``slip_target_gain_scale_floor``, off the fixed 0.2 per km/h, GxF G per km/h times the pressure
 held over the demand, never below F of it; docs/environment.md), so that a
@@ -77,6 +78,11 @@ def main(argv: list[str] | None = None) -> int:
         help="the loop's calibration of the wheel-speed sensors' scales at the stop's onset",
     )
     ap.add_argument(
+        "--lock-guard",
+        choices=("on", "off"),
+        help="the loop's cap on its requests at low speed on a low-adhesion stop",
+    )
+    ap.add_argument(
         "--pressure-gain",
         help="the loop's gain: off (a fixed 0.2 per km/h) or GxF (G per km/h times the pressure "
         "held over the demand, never below F of it, e.g. 0.8x0.25)",
@@ -100,6 +106,8 @@ def main(argv: list[str] | None = None) -> int:
             settings["slip_target_scale_calibration"] = args.scale_calibration == "on"
         if args.onset_two_sided is not None:
             settings["slip_target_onset_two_sided"] = args.onset_two_sided == "on"
+        if args.lock_guard is not None:
+            settings["slip_target_lock_guard"] = args.lock_guard == "on"
         if args.pressure_gain is not None:
             gain, floor = parse_pressure_gain(
                 args.pressure_gain, f"--pressure-gain {args.pressure_gain}"
@@ -109,7 +117,8 @@ def main(argv: list[str] | None = None) -> int:
         if not settings:
             raise ValueError(
                 "nothing to set: give --release, --max-creep, --drift-correction, "
-                "--onset-drift, --onset-two-sided, --scale-calibration and/or --pressure-gain"
+                "--onset-drift, --onset-two-sided, --scale-calibration, --lock-guard and/or "
+                "--pressure-gain"
             )
         if args.out.suffix != ".zip":
             raise ValueError(f"{args.out}: the copy must be a .zip model file")

@@ -109,6 +109,10 @@ def test_a_target_with_the_drift_correction_runs_the_corrected_loop():
     assert (sched.loop.max_creep, sched.loop.creep_floor_kmh) == (0.02, 0.5)
     assert sched.loop.onset_two_sided and sched.loop.scale_calibration
     assert sched.name == "slip_target_2kmh_creep0.02at0.5_drift_onset2_cal"
+    assert not sched.loop.lock_guard
+    guard = fresh_stops.build_policy("target:1:drift:onset2:cal:guard", "wheels+accel")
+    assert guard.loop.lock_guard and guard.loop.scale_calibration
+    assert guard.name == "slip_target_1kmh_drift_onset2_cal_guard"
     cap = fresh_stops.build_policy("target:2:0.8x0.25:creep0.1", "wheels")
     assert (cap.loop.max_creep, cap.loop.creep_floor_kmh, cap.loop.gain_scale_floor) == (
         0.1, 2.0, 0.25)  # fmt: skip

@@ -289,6 +289,44 @@ def test_rail_target_teacher_is_the_constant_target_of_its_rail():
     assert np.allclose(teacher.act(core.obs), [[0.0] * 4, [-0.6] * 4, [1.0] * 4])
 
 
+def test_rail_teachers_creep_schedule_follows_the_loops_reference():
+    """``pretrain.teacher_creep``: a scheduled rail's target is ``min(T, max(c 3.6 v_ref,
+    floor))`` on the reference the environment's loop tracks (its drift-corrected one here),
+    read when the teacher acts; a rail without a schedule keeps its constant target. Through
+    ``SlipTargetOracle`` (its own loop) the schedule is the same loop's creep cap at that
+    creep and floor, bit for bit: the two say the same thing."""
+    from wsp_env.baselines.oracle import SlipTargetOracle, SlipTargetTeacher
+    from wsp_env.baselines.slip_target import SlipTargetLoop, SlipTargetPolicy
+    from wsp_env.evaluation import CaseConfig, SuiteConfig, run_suite
+
+    core = make_core(2, vehicle="uic_z1", action_mode="slip_target", accelerometer=True,
+                     slip_target_drift_correction=True)  # fmt: skip
+    teacher = SlipTargetTeacher({"soap": 3.5, "leaves": 2.0}, {"leaves": 0.015}, 0.5)
+    teacher.bind(core)
+    for e, rail in enumerate(("soap", "leaves")):
+        core.reset_env(e, {"rail": rail, "speed_kmh": 60.0})
+    teacher.reset(np.arange(2))
+    for v_kmh, want in ((150.0, 2.0), (60.0, 0.9), (20.0, 0.5)):
+        t = teacher.targets_kmh(np.full(2, v_kmh / 3.6))
+        assert np.allclose(t, [[3.5] * 4, [want] * 4])
+    # the loop advances on the period's observation (its first read); the teacher reads its
+    # reference
+    v_loop = core.loop.reference_mps(core.obs[:, : core.kernel_obs_dim])
+    assert np.array_equal(v_loop, core.loop.v_ref) and v_loop[1] > 0.0
+    assert np.allclose(teacher.targets_kmh()[1], min(2.0, 0.015 * 3.6 * v_loop[1]))
+    case = CaseConfig(name="leaves", rail="leaves", mu_contaminated=0.05, pattern="uniform",
+                      speeds_kmh=("60",))  # fmt: skip
+    suite = SuiteConfig(name="t", description="", seeds=(3,), cases=(case,))
+    sched = SlipTargetOracle(SlipTargetTeacher({"leaves": 2.0}, {"leaves": 0.015}, 0.5))
+    (own,), _ = run_suite("uic_z1", suite, sched, record="none")
+    capped = SlipTargetPolicy(2.0, SlipTargetLoop(max_creep=0.015, creep_floor_kmh=0.5))
+    (ref,), _ = run_suite("uic_z1", suite, capped, record="none")
+    const = SlipTargetPolicy(2.0)
+    (plain,), _ = run_suite("uic_z1", suite, const, record="none")
+    assert own["stopping_distance_m"] == ref["stopping_distance_m"]
+    assert own["stopping_distance_m"] != plain["stopping_distance_m"]  # the schedule acted
+
+
 def test_slip_target_student_is_the_imitation_start_handed_over(tmp_path):
     """A slip-target learner (action repeat 4, staggered starts) warm-started by
     oracle_target_rail with the config's own table (``pretrain.teacher_targets_kmh``): the fit
@@ -313,8 +351,8 @@ def test_slip_target_student_is_the_imitation_start_handed_over(tmp_path):
     labels = []  # (rail of the stop, label) at every teacher call
     real = imitation.make_teacher
 
-    def spy(name, targets_kmh=None):
-        teacher = real(name, targets_kmh)
+    def spy(name, *args):
+        teacher = real(name, *args)
         act = teacher.act
 
         def recorded(obs):

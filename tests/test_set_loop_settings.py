@@ -98,6 +98,12 @@ def test_the_copy_names_the_settings_and_keeps_the_rest(tmp_path, capsys):
     kw = model_metadata(two)["env_kwargs"]
     assert kw["slip_target_onset_two_sided"] is True and kw["slip_target_onset_drift"] is True
     assert model_metadata(onset)["env_kwargs"]["slip_target_onset_two_sided"] is False
+    # the lock guard: a file from before it loads without; the copy names it
+    assert model_metadata(old)["env_kwargs"]["slip_target_lock_guard"] is False
+    guard = tmp_path / "guard" / "student.zip"
+    assert set_loop_settings.main([str(old), str(guard), "--lock-guard", "on"]) == 0
+    kw = model_metadata(guard)["env_kwargs"]
+    assert kw["slip_target_lock_guard"] is True and kw["slip_target_release"] == "always"
 
 
 def test_an_existing_copy_or_a_failed_write_leaves_nothing_new(tmp_path, capsys, monkeypatch):

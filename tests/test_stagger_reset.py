@@ -227,7 +227,7 @@ def test_dagger_teacher_is_reset_after_the_warm_up(monkeypatch):
             raise SeenError
 
     teacher = Teacher()
-    monkeypatch.setattr(imitation, "make_teacher", lambda name, targets_kmh=None: teacher)
+    monkeypatch.setattr(imitation, "make_teacher", lambda name, *args: teacher)
     env = SB3VecEnv(num_envs=3, stagger_reset_steps=100)
     with pytest.raises(SeenError):
         imitation.pretrain(None, env, env.venv.core, imitation.PretrainConfig(), gamma=0.99)

@@ -283,7 +283,8 @@ POLICY_ENV_KWARGS = (
     "slip_target_min_kmh", "slip_target_max_kmh", "slip_target_gain_per_kmh",
     "slip_target_lead_s", "slip_target_release", "slip_target_max_creep",
     "slip_target_drift_correction", "slip_target_gain_scale_floor", "slip_target_onset_drift",
-    "slip_target_scale_calibration", "slip_target_onset_two_sided", "memory_features",
+    "slip_target_scale_calibration", "slip_target_onset_two_sided", "slip_target_lock_guard",
+    "memory_features",
     "memory_target_mean",
 )  # fmt: skip
 # the slip-target loop's periodic-release gate of a model file that does not name it: written
@@ -300,6 +301,7 @@ LEGACY_LOOP_SETTINGS: dict[str, Any] = {
     "slip_target_onset_drift": False,
     "slip_target_scale_calibration": False,
     "slip_target_onset_two_sided": False,
+    "slip_target_lock_guard": False,
 }
 
 
@@ -309,6 +311,7 @@ def loop_settings_now() -> dict[str, Any]:
     from wsp_env.baselines.slip_target import (
         DEFAULT_DRIFT_CORRECTION,
         DEFAULT_GAIN_SCALE_FLOOR,
+        DEFAULT_LOCK_GUARD,
         DEFAULT_MAX_CREEP,
         DEFAULT_ONSET_DRIFT,
         DEFAULT_ONSET_TWO_SIDED,
@@ -324,6 +327,7 @@ def loop_settings_now() -> dict[str, Any]:
         "slip_target_onset_drift": DEFAULT_ONSET_DRIFT,
         "slip_target_scale_calibration": DEFAULT_SCALE_CALIBRATION,
         "slip_target_onset_two_sided": DEFAULT_ONSET_TWO_SIDED,
+        "slip_target_lock_guard": DEFAULT_LOCK_GUARD,
     }
 
 

@@ -262,6 +262,7 @@ num_envs=N, **kwargs)``:
 | ``slip_target_onset_drift`` | bool | ``False`` | slip-target mode, with ``slip_target_drift_correction`` (an error without it): the loop reads the accelerometer's offset while every cylinder is still under its brake's threshold at the stop's start (the wheels' mean deceleration against the mean reading) and takes the drift it carries the aided reference above the train away until the first anchor whose jump it reads (docs/training_log.md, "The onset reading of the accelerometer's offset"); a policy file that does not name it loads with ``False`` |
 | ``slip_target_scale_calibration`` | bool | ``False`` | slip-target mode, either tier: the loop reads each wheel-speed sensor's scale against the wheels' mean while every cylinder is still under its brake's threshold at the stop's start (every wheel rolls with the train) and divides it out of the wheels' readings and the estimator's reference (a BCU's wheel-diameter calibration; docs/training_log.md, "The wheel-scale calibration"); a policy file that does not name it loads with ``False`` |
 | ``slip_target_onset_two_sided`` | bool | ``False`` | slip-target mode, with ``slip_target_onset_drift`` (an error without it): the onset reading corrects its other sense too, a reading of too much deceleration (a downhill's ``g sin(theta)``, a positive bias), which carries the aided reference below the train; every drift downward, this reading's or one read from an anchor's jump, raises the tracked reference only for the time no wheel has held the estimator's reference up (within 0.1 km/h of the fastest reading) since the last anchor (docs/training_log.md, "The onset reading's other sense"); a policy file that does not name it loads with ``False`` |
+| ``slip_target_lock_guard`` | bool | ``False`` | slip-target mode, either tier: below 15 km/h, on a stop where a wheel has slipped beyond the estimator's working band and the reference has slowed at under 0.85 m/s^2 on average (a low-adhesion rail), every valve asks for at most 0.8 of the demand, so that a wheel meeting a contaminated patch at low speed locks for less time while its cylinder vents (``baselines/slip_target.py``, ``LOCK_GUARD_*``; docs/training_log.md, "The lock guard, and a creep schedule for the Régiolis's leaves teacher"); a policy file that does not name it loads with ``False`` |
 | ``stagger_reset_steps`` | int | ``0`` | vector class only (the single class takes only 0), a training option: ``reset`` advances each environment a random, seeded number of steps below this into a stop, driven by the classical WSP, so that stops do not all end together (``WSPBrakingVectorEnv``'s docstring); 0: off |
 | ``memory_features`` | bool | False | append the memory features (Observation Space): per axle time in the current slide, time since the last release, sliding-energy estimate |
 | ``memory_target_mean`` | bool | False | slip-target mode (an error in the others): append each valve's mean slip-target action over the stop so far (Observation Space); a policy file that does not name it loads with ``False`` |
@@ -354,6 +355,9 @@ num_envs=N, **kwargs)``:
   tracked reference's drop when a wheel holds the estimator's reference again is no longer
   read as the reference's deceleration by the loop's lead term (figures of the option moved by
   decimetres a stop; docs/training_log.md, "The onset reading's other sense").
+* v3, 2026-12-08 (no new version; off by default): the slip-target loop may cap its requests at
+  low speed on a low-adhesion stop (``slip_target_lock_guard``). A policy file that does not
+  name it loads with ``False``.
 """
 
 from __future__ import annotations
@@ -373,6 +377,7 @@ from wsp_env.baselines.slip_target import (
     DEFAULT_DRIFT_CORRECTION,
     DEFAULT_GAIN_PER_KMH,
     DEFAULT_GAIN_SCALE_FLOOR,
+    DEFAULT_LOCK_GUARD,
     DEFAULT_MAX_CREEP,
     DEFAULT_ONSET_DRIFT,
     DEFAULT_ONSET_TWO_SIDED,
@@ -394,13 +399,14 @@ def make_core(n_envs: int, **kwargs: Any) -> BrakingCore:
     loop (``baselines.slip_target.SlipTargetLoop``, with ``slip_target_gain_per_kmh``,
     ``slip_target_lead_s``, ``slip_target_release``, ``slip_target_max_creep``,
     ``slip_target_drift_correction``, ``slip_target_gain_scale_floor``,
-    ``slip_target_onset_drift``, ``slip_target_scale_calibration`` and
-    ``slip_target_onset_two_sided``, on the same tier's
+    ``slip_target_onset_drift``, ``slip_target_scale_calibration``,
+    ``slip_target_onset_two_sided`` and ``slip_target_lock_guard``, on the same tier's
     classical thresholds) tracks the targets."""
     from wsp_env.baselines.slip_target import (
         SlipTargetLoop,
         check_drift_correction,
         check_gain_scale_floor,
+        check_lock_guard,
         check_loop_args,
         check_max_creep,
         check_onset_drift,
@@ -429,6 +435,7 @@ def make_core(n_envs: int, **kwargs: Any) -> BrakingCore:
     two_sided = check_onset_two_sided(
         kwargs.pop("slip_target_onset_two_sided", DEFAULT_ONSET_TWO_SIDED), onset
     )
+    guard = check_lock_guard(kwargs.pop("slip_target_lock_guard", DEFAULT_LOCK_GUARD))
     mode = kwargs.get("action_mode")
     if mode in ("residual", "slip_target"):
         from wsp_env.baselines.classical import ClassicalWSP, accelerometer_tier, load_wsp_config
@@ -448,6 +455,7 @@ def make_core(n_envs: int, **kwargs: Any) -> BrakingCore:
                 onset_drift=onset,
                 scale_calibration=calibrate,
                 onset_two_sided=two_sided,
+                lock_guard=guard,
             )
             kwargs.setdefault("slip_target_loop", loop)
     return BrakingCore(n_envs, **kwargs)
@@ -531,6 +539,7 @@ class WSPBrakingEnv(gym.Env):
         slip_target_onset_drift: bool = DEFAULT_ONSET_DRIFT,
         slip_target_scale_calibration: bool = DEFAULT_SCALE_CALIBRATION,
         slip_target_onset_two_sided: bool = DEFAULT_ONSET_TWO_SIDED,
+        slip_target_lock_guard: bool = DEFAULT_LOCK_GUARD,
         memory_features: bool = False,
         memory_target_mean: bool = False,
         stagger_reset_steps: int = 0,
@@ -563,6 +572,7 @@ class WSPBrakingEnv(gym.Env):
             slip_target_onset_drift=slip_target_onset_drift,
             slip_target_scale_calibration=slip_target_scale_calibration,
             slip_target_onset_two_sided=slip_target_onset_two_sided,
+            slip_target_lock_guard=slip_target_lock_guard,
             memory_features=memory_features, memory_target_mean=memory_target_mean,
         )  # fmt: skip
         self.action_space = self.core.action_space()
@@ -728,6 +738,7 @@ class WSPBrakingVectorEnv(VectorEnv):
         slip_target_onset_drift: bool = DEFAULT_ONSET_DRIFT,
         slip_target_scale_calibration: bool = DEFAULT_SCALE_CALIBRATION,
         slip_target_onset_two_sided: bool = DEFAULT_ONSET_TWO_SIDED,
+        slip_target_lock_guard: bool = DEFAULT_LOCK_GUARD,
         memory_features: bool = False,
         memory_target_mean: bool = False,
         stagger_reset_steps: int = 0,
@@ -762,6 +773,7 @@ class WSPBrakingVectorEnv(VectorEnv):
             slip_target_onset_drift=slip_target_onset_drift,
             slip_target_scale_calibration=slip_target_scale_calibration,
             slip_target_onset_two_sided=slip_target_onset_two_sided,
+            slip_target_lock_guard=slip_target_lock_guard,
             memory_features=memory_features, memory_target_mean=memory_target_mean,
         )  # fmt: skip
         self.num_envs = num_envs

@@ -67,7 +67,8 @@ POLICY_KEYS = (
     "slip_target_max_kmh", "slip_target_gain_per_kmh", "slip_target_lead_s",
     "slip_target_release", "slip_target_max_creep", "slip_target_drift_correction",
     "slip_target_gain_scale_floor", "slip_target_onset_drift", "slip_target_scale_calibration",
-    "slip_target_onset_two_sided", "memory_features", "memory_target_mean",
+    "slip_target_onset_two_sided", "slip_target_lock_guard", "memory_features",
+    "memory_target_mean",
 )  # fmt: skip
 RESERVED = ("none", "classical", "oracle")  # the score's ends and the upper reference
 

@@ -34,8 +34,8 @@ ENV_KWARGS = (
     "slip_target_min_kmh", "slip_target_max_kmh", "slip_target_gain_per_kmh",
     "slip_target_lead_s", "slip_target_release", "slip_target_max_creep",
     "slip_target_drift_correction", "slip_target_gain_scale_floor", "slip_target_onset_drift",
-    "slip_target_scale_calibration", "slip_target_onset_two_sided", "memory_features",
-    "memory_target_mean",
+    "slip_target_scale_calibration", "slip_target_onset_two_sided", "slip_target_lock_guard",
+    "memory_features", "memory_target_mean",
     "stagger_reset_steps",
 )  # fmt: skip
 SCHEDULE = re.compile(r"^lin_([0-9.eE+-]+)$")
@@ -275,6 +275,8 @@ def parse_train_config(data: Any, source: str = "") -> TrainConfig:
         mode = env_kwargs.get("action_mode", "continuous")
         if pretrain_cfg.teacher_targets_kmh is not None:
             _check_teacher_table(pretrain_cfg, env_kwargs)
+        if pretrain_cfg.teacher_creep is not None:
+            _check_teacher_creep(pretrain_cfg)
         if pretrain_cfg.teacher in TARGET_TEACHERS:
             if mode != "slip_target":
                 raise ConfigError(
@@ -445,6 +447,20 @@ def _check_teacher_table(pretrain_cfg: Any, env_kwargs: dict[str, Any]) -> None:
         if not lo <= kmh <= hi:
             raise ConfigError(f"{where}.{rail}: {kmh} km/h is outside the slip-target range "
                               f"{lo:g}-{hi:g} km/h")  # fmt: skip
+
+
+def _check_teacher_creep(pretrain_cfg: Any) -> None:
+    """``pretrain.teacher_creep``: only beside a rail table (``teacher_targets_kmh``), and only
+    for rails the table names (each value's range is the field's own check)."""
+    where = "pretrain.teacher_creep"
+    table = pretrain_cfg.teacher_targets_kmh
+    if table is None:
+        raise ConfigError(f"{where}: needs pretrain.teacher_targets_kmh (the rail table whose "
+                          "targets it schedules)")  # fmt: skip
+    extra = sorted(set(pretrain_cfg.teacher_creep) - set(table))
+    if extra:
+        raise ConfigError(f"{where}.{extra[0]}: not a rail of pretrain.teacher_targets_kmh "
+                          f"({', '.join(sorted(table))})")  # fmt: skip
 
 
 def _number(x: Any) -> bool:

@@ -135,6 +135,10 @@ def input_spec(policy: SB3Policy) -> dict[str, Any]:
         CAL_MAX_FACTOR,
         CAL_MIN_SPEED_MPS,
         DRIFT_MIN_SPAN_S,
+        LOCK_GUARD_DECEL_MPS2,
+        LOCK_GUARD_FRACTION,
+        LOCK_GUARD_SPEED_KMH,
+        LOCK_GUARD_TAU_S,
         ONSET_MIN_S,
         REF_HELD_TOL_MPS,
     )
@@ -233,6 +237,14 @@ def input_spec(policy: SB3Policy) -> dict[str, Any]:
             "scale_calibration": loop.scale_calibration,
             "cal_min_speed_kmh": CAL_MIN_SPEED_MPS * 3.6,
             "cal_max_factor": CAL_MAX_FACTOR,
+            # below lock_guard_speed_kmh, on a stop where a wheel slipped beyond the working
+            # band and the reference's fall, averaged first-order over lock_guard_tau_s, is
+            # under lock_guard_decel_mps2: every request at most lock_guard_fraction
+            "lock_guard": loop.lock_guard,
+            "lock_guard_speed_kmh": LOCK_GUARD_SPEED_KMH,
+            "lock_guard_fraction": LOCK_GUARD_FRACTION,
+            "lock_guard_decel_mps2": LOCK_GUARD_DECEL_MPS2,
+            "lock_guard_tau_s": LOCK_GUARD_TAU_S,
             "tier": tier,
             "wsp": dataclasses.asdict(loop.cfg),
         }

@@ -59,6 +59,11 @@ class PretrainConfig:
     teacher_targets_kmh: dict[str, float] | None = field(
         default=None, metadata={"ge": 0.0, "le": 30.0}
     )
+    # oracle_target_rail's creep schedules (rail -> a fraction of the reference speed; a rail
+    # not named: its constant target), never under teacher_creep_floor_kmh
+    # (``baselines.oracle.SlipTargetTeacher``)
+    teacher_creep: dict[str, float] | None = field(default=None, metadata={"gt": 0.0, "le": 1.0})
+    teacher_creep_floor_kmh: float = field(default=0.5, metadata={"ge": 0.0, "le": 30.0})
     rounds: int = field(default=6, metadata={"gt": 0})
     steps_per_round: int = field(default=131_072, metadata={"gt": 0})
     warmup_steps: int = field(default=65_536, metadata={"ge": 0})
@@ -75,8 +80,14 @@ class PretrainConfig:
     anchor_epochs: int = field(default=1, metadata={"gt": 0})
 
 
-def make_teacher(name: str, targets_kmh: dict[str, float] | None = None) -> Any:
-    """The teacher ``name`` (``TEACHERS``); ``targets_kmh``: ``oracle_target_rail``'s table."""
+def make_teacher(
+    name: str,
+    targets_kmh: dict[str, float] | None = None,
+    creep: dict[str, float] | None = None,
+    creep_floor_kmh: float = 0.5,
+) -> Any:
+    """The teacher ``name`` (``TEACHERS``); ``targets_kmh``: ``oracle_target_rail``'s table,
+    ``creep`` and ``creep_floor_kmh`` its creep schedules (``SlipTargetTeacher``)."""
     if name == "oracle_peak":
         from wsp_env.baselines.oracle import SlipTracker
 
@@ -88,7 +99,7 @@ def make_teacher(name: str, targets_kmh: dict[str, float] | None = None) -> Any:
     if name == "oracle_target_rail":
         from wsp_env.baselines.oracle import SlipTargetTeacher
 
-        return SlipTargetTeacher(targets_kmh)
+        return SlipTargetTeacher(targets_kmh, creep, creep_floor_kmh)
     from wsp_env.baselines.classical import ClassicalWSP
 
     return ClassicalWSP()  # the learner's tier's frozen thresholds, taken at ``bind``
@@ -100,7 +111,9 @@ def pretrain(model: Any, env: Any, core: Any, cfg: PretrainConfig, gamma: float)
     import torch
 
     norm = _find_wrapper(env, "VecNormalize")
-    teacher = make_teacher(cfg.teacher, cfg.teacher_targets_kmh)
+    teacher = make_teacher(
+        cfg.teacher, cfg.teacher_targets_kmh, cfg.teacher_creep, cfg.teacher_creep_floor_kmh
+    )
     teacher.bind(core)
     n = core.n_envs
     obs = env.reset()
@@ -175,7 +188,11 @@ def pretrain(model: Any, env: Any, core: Any, cfg: PretrainConfig, gamma: float)
     model._last_episode_starts = dones
     env_steps = (warm + cfg.rounds * steps) * n
     table = getattr(teacher, "table", None)  # oracle_target_rail's targets, as it used them
-    return {"teacher": cfg.teacher, "teacher_targets_kmh": table, "env_steps": int(env_steps),
+    creep = getattr(teacher, "creep", None) or None  # its creep schedules, if any
+    return {"teacher": cfg.teacher, "teacher_targets_kmh": table,
+            **({"teacher_creep": creep, "teacher_creep_floor_kmh": teacher.floor_kmh}
+               if creep else {}),
+            "env_steps": int(env_steps),
             "warmup_steps": int(warm * n), "warmup_episodes_min": int(finished.min()),
             "rounds": history}  # fmt: skip
 
