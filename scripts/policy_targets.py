@@ -31,7 +31,7 @@ from wsp_env.evaluation.benchmark import DAMAGE_CRITERIA, POLICY_KEYS
 from wsp_env.evaluation.runner import run_runs
 from wsp_env.evaluation.suites import Run
 from wsp_env.physics import layout as L
-from wsp_env.training.config import config_teacher_table
+from wsp_env.training.config import config_teacher_creep, config_teacher_table
 
 
 class TargetRecorder:
@@ -119,8 +119,14 @@ def main(argv: list[str] | None = None) -> int:
         if args.teacher:
             try:
                 teacher = config_teacher_table(args.teacher)
+                scheduled = config_teacher_creep(args.teacher)[0]
             except ValueError as err:
                 raise ValueError(f"--teacher {err}") from None
+            if scheduled:  # a target that moves with the speed is no table row
+                raise ValueError(
+                    f"--teacher {args.teacher}: rail {sorted(scheduled)[0]}'s target is a "
+                    "creep schedule (pretrain.teacher_creep); this compares constant tables"
+                )
         veh, max_time_s, kw = benchmark_setup(args.vehicle, args.tier)
         policy = TargetRecorder(build_policy(args.policy, args.tier), edges)
         seeds = [FRESH_SEED_BASE + i for i in range(args.draw)]

@@ -21,8 +21,8 @@ until then: the wheels tier's 2.0 m/s^2 recovery hold and 3 s release interval w
 ``--rail-teacher`` adds ``baselines.oracle.SlipTargetOracle``: the privileged teacher of the
 imitation start (``oracle_target_rail``: each stop's constant target picked by its rail, which
 the sensors do not measure), through the same loop; ``--teacher-table CONFIG`` (implies it)
-gives it a training config's table (``pretrain.teacher_targets_kmh``) instead of
-``oracle.RAIL_TARGETS_KMH``.
+gives it a training config's table (``pretrain.teacher_targets_kmh``, with its creep
+schedules, ``pretrain.teacher_creep``) instead of ``oracle.RAIL_TARGETS_KMH``.
 """
 
 from __future__ import annotations
@@ -46,7 +46,7 @@ from wsp_env.baselines.slip_target import (
 )
 from wsp_env.cli.printing import print_benchmark
 from wsp_env.evaluation.benchmark import SEALED_RUNS, STOP_SETS, run_benchmark
-from wsp_env.training.config import config_teacher_table
+from wsp_env.training.config import config_teacher_creep, config_teacher_table
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -106,8 +106,8 @@ def main(argv: list[str] | None = None) -> int:
     )
     ap.add_argument(
         "--teacher-table",
-        help="a training config whose pretrain.teacher_targets_kmh the rail teacher asks for "
-        "(implies --rail-teacher)",
+        help="a training config whose pretrain.teacher_targets_kmh (and teacher_creep) the "
+        "rail teacher asks for (implies --rail-teacher)",
     )
     ap.add_argument(
         "--pressure-gain",
@@ -143,10 +143,11 @@ def main(argv: list[str] | None = None) -> int:
     if any(sides) and not all(onsets):
         print("--onset-two-sided on: needs --onset-drift on (only)", file=sys.stderr)
         return 2
-    table = None
+    table, creep, floor = None, {}, 0.5
     if args.teacher_table:
         try:
             table = config_teacher_table(args.teacher_table)
+            creep, floor = config_teacher_creep(args.teacher_table)
         except ValueError as err:
             print(f"--teacher-table {err}", file=sys.stderr)
             return 2
@@ -179,7 +180,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.rail_teacher or table is not None:  # under each loop too (named where it is not
         # the default)
         for kw in loops:
-            teacher = SlipTargetOracle(None if table is None else SlipTargetTeacher(table))
+            own = None if table is None else SlipTargetTeacher(table, creep, floor)
+            teacher = SlipTargetOracle(own)
             teacher.loop = SlipTargetLoop(wsp, **kw)
             teacher.name += loop_suffix(teacher.loop)
             policies.append(teacher)

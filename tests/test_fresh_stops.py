@@ -227,6 +227,15 @@ def test_policy_targets_bins_every_decision_by_the_train_speed(capsys):
     assert pt.main(["--policy", "target:3", "--teacher", str(root / "ppo_uic_z1.yaml")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "no pretrain.teacher_targets_kmh" in err
+    # a teacher whose leaves target is a creep schedule has no constant row to compare
+    from wsp_env.training.config import config_teacher_creep
+
+    guard = root / "ppo_bc_slip_target_guard_accel_regiolis.yaml"
+    assert config_teacher_creep(guard) == ({"leaves": 0.015}, 0.5)
+    assert config_teacher_creep(root / "ppo_bc_slip_target_cal_accel_uic_z1.yaml")[0] == {}
+    assert pt.main(["--policy", "target:3", "--teacher", str(guard)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "rail leaves's target is a creep schedule" in err
 
 
 def test_an_axle_profile_holds_its_leading_axles_higher():

@@ -611,10 +611,12 @@ def test_training_config_and_trained_model_carry_the_mode(tmp_path):
     assert policy.env_kwargs["slip_target_onset_drift"] is False
     assert policy.env_kwargs["memory_target_mean"] is True
     assert policy.env_kwargs["slip_target_onset_two_sided"] is False
+    assert policy.env_kwargs["slip_target_lock_guard"] is False  # named: the default now
     meta = model_metadata(out / "best_model.zip")
     del meta["env_kwargs"]["slip_target_gain_scale_floor"]
     del meta["env_kwargs"]["slip_target_onset_drift"]
     del meta["env_kwargs"]["slip_target_onset_two_sided"]
+    del meta["env_kwargs"]["slip_target_lock_guard"]
     del meta["env_kwargs"]["slip_target_drift_correction"]
     assert (
         model_metadata(out / "best_model.zip")["env_kwargs"]["slip_target_drift_correction"]
@@ -633,6 +635,7 @@ def test_training_config_and_trained_model_carry_the_mode(tmp_path):
     assert kw["slip_target_gain_scale_floor"] == 1.0  # from before the scaled gain: fixed
     assert kw["slip_target_onset_drift"] is False  # from before the onset reading
     assert kw["slip_target_onset_two_sided"] is False  # from before its other sense
+    assert kw["slip_target_lock_guard"] is False  # from before the lock guard
     del meta["env_kwargs"]["slip_target_release"]
     write_model_metadata(old, meta)
     kw = model_metadata(old)["env_kwargs"]
@@ -686,6 +689,8 @@ def test_training_config_and_trained_model_carry_the_mode(tmp_path):
     assert loop["gain_scale_floor"] == 1.0
     assert loop["onset_drift"] is False and loop["onset_min_s"] == 0.2
     assert loop["onset_two_sided"] is False and loop["ref_held_tol_kmh"] == pytest.approx(0.1)
+    assert loop["lock_guard"] is False and loop["lock_guard_fraction"] == 0.8
+    assert (loop["lock_guard_speed_kmh"], loop["lock_guard_decel_mps2"]) == (15.0, 0.85)
     assert loop["onset_free_share"] == pytest.approx([0.174 / 3.8] * 4)
     assert (loop["accel_offset_gain"], loop["accel_learn_min_span_s"]) == (0.5, 2.0)
     assert (loop["working_band_kmh"], loop["working_band_rel"]) == pytest.approx((1.04, 0.0606))

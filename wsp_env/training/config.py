@@ -193,6 +193,17 @@ def config_teacher_table(path: str | Path) -> dict[str, float]:
     return dict(table)
 
 
+def config_teacher_creep(path: str | Path) -> tuple[dict[str, float], float]:
+    """The rail teacher's creep schedules of the training config at ``path``
+    (``pretrain.teacher_creep``, rail -> creep; empty where it has none) and their floor
+    (``pretrain.teacher_creep_floor_kmh``), checked as ``load_train_config`` checks them."""
+    cfg = load_train_config(path)
+    pre = cfg.pretrain
+    if pre is None:
+        return {}, 0.5
+    return dict(pre.teacher_creep or {}), float(pre.teacher_creep_floor_kmh)
+
+
 def parse_train_config(data: Any, source: str = "") -> TrainConfig:
     from wsp_env.core.config import from_dict
 

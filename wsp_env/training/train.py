@@ -821,7 +821,7 @@ def pin_loop_settings(cfg: TrainConfig, started_before: bool) -> TrainConfig:
     """A slip-target run's config with its loop's later settings (``policy.
     LEGACY_LOOP_SETTINGS``: the periodic release's gate, the creep cap, the drift correction,
     the gain's scale floor, the onset reading, the wheel-scale calibration, the onset reading's
-    other sense)
+    other sense, the lock guard)
     named, as it is written
     to the run folder (``config.yaml``): a new run gets the defaults (``policy.
     loop_settings_now``); a run folder whose config does not name one was started before that
