@@ -210,9 +210,9 @@ class SlipTargetTeacher:
     a rail's target a **creep schedule**: ``min(T, max(creep 3.6 v_ref, floor_kmh))`` km/h, the
     rail's target ``T`` until the creep falls under it, then that creep of the reference speed
     the slip-target loop tracks (``SlipTargetLoop.reference_mps``), never under ``floor_kmh``:
-    a slip near the adhesion peak, which lies at a creepage, as the train slows
-    (``docs/training_log.md``, "The lock guard, and a creep schedule for the Régiolis's leaves
-    teacher").
+    a slip near the adhesion peak, which lies at a creepage (``docs/physics.md``, "Adhesion"),
+    as the train slows (``docs/training_log.md``, "The lock guard, and a creep schedule for the
+    Régiolis's leaves teacher").
 
     ``targets_kmh()`` gives the targets (``(n_envs, n_valves)``, clipped to the core's range);
     ``act`` the environment's actions for them, ``2 (s* - s_min) / (s_max - s_min) - 1``."""
@@ -266,16 +266,21 @@ class SlipTargetTeacher:
 
 class SlipTargetOracle(SlipTargetPolicy):
     """``SlipTargetTeacher``'s targets tracked by the slip-target inner loop, as a policy for any
-    continuous-action environment: ``SlipTargetPolicy`` whose constant target is the teacher's
-    for each stop, so the teacher runs through the same code path as every other controller
-    (``scripts/slip_target_benchmark.py --rail-teacher``)."""
+    continuous-action environment: ``SlipTargetPolicy`` whose target is the teacher's for each
+    stop (constant, or with a creep schedule the teacher's on this loop's reference every
+    period), so the teacher runs through the same code path as every other controller
+    (``scripts/slip_target_benchmark.py --rail-teacher``); a scheduled teacher's name says its
+    schedules (``_creep<rail><c>at<floor>``)."""
 
     privileged = True
 
     def __init__(self, teacher: SlipTargetTeacher | None = None) -> None:
         super().__init__(DEFAULT_TARGET_KMH)
         self.teacher = teacher or SlipTargetTeacher()
-        self.name = self.teacher.name
+        self.name = self.teacher.name + "".join(
+            f"_creep{rail}{c:g}at{self.teacher.floor_kmh:g}"
+            for rail, c in sorted(self.teacher.creep.items())
+        )
 
     def bind(self, core: Any) -> None:
         super().bind(core)

@@ -189,6 +189,10 @@ LOCK_GUARD_SPEED_KMH = 15.0
 LOCK_GUARD_FRACTION = 0.8
 LOCK_GUARD_DECEL_MPS2 = 0.85
 LOCK_GUARD_TAU_S = 2.0
+# the guard acts only after this long into a stop (s: three of the average's time constants),
+# so the average, which starts at 0, has forgotten its start (a stop begun at low speed on a dry
+# rail would otherwise read as a low-adhesion one)
+LOCK_GUARD_SETTLE_S = 3.0 * LOCK_GUARD_TAU_S
 # the creep cap's default floor: it never asks for less than this (km/h of measured slip; a
 # lower target is kept); the environment's loop always has it, a probe may lower it
 MAX_CREEP_FLOOR_KMH = 2.0
@@ -449,6 +453,7 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         # whether the guard caps the requests this period (``advance``)
         self.guard_slipped = np.zeros(n, dtype=bool)
         self.guard_decel = np.zeros(n)
+        self.guard_time_s = np.zeros(n)  # the time since the stop began (s)
         self.guard_on = np.zeros(n, dtype=bool)
 
     def reset(self, env_ids: np.ndarray) -> None:
@@ -482,6 +487,7 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         self.kernel_wheels[env_ids] = 0.0
         self.guard_slipped[env_ids] = False
         self.guard_decel[env_ids] = 0.0
+        self.guard_time_s[env_ids] = 0.0
         self.guard_on[env_ids] = False
 
     # bound once (``bind``); every other array evolves (``state_dict``)
@@ -712,15 +718,19 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         the Régiolis's 3.8 bar at its 10 bar/s. So below ``LOCK_GUARD_SPEED_KMH``, on a stop
         where a wheel has slipped beyond the working band and the reference has slowed at
         under ``LOCK_GUARD_DECEL_MPS2`` on average (a first-order average over
-        ``LOCK_GUARD_TAU_S`` of the period's fall, ``decel_ref``), ``command`` asks for at most
+        ``LOCK_GUARD_TAU_S`` of the period's fall, ``decel_ref``, from 0 at the stop's start,
+        so only after ``LOCK_GUARD_SETTLE_S``), ``command`` asks for at most
         ``LOCK_GUARD_FRACTION`` of the demand; never below the minimum speed, where the full
-        demand is the rule."""
+        demand is the rule. The threshold is absolute, chosen on the Régiolis at the full and
+        the service demand (a dry or wet rail's stops read 1 m/s^2 and more there)."""
         self.guard_slipped |= self._slips(v_ref, v)
         self.guard_decel += (self.dt / LOCK_GUARD_TAU_S) * (self.decel_ref - self.guard_decel)
+        self.guard_time_s += self.dt
         self.guard_on[...] = (
             self.guard_slipped
             & (v_ref < LOCK_GUARD_SPEED_KMH / 3.6)
             & (self.guard_decel < LOCK_GUARD_DECEL_MPS2)
+            & (self.guard_time_s >= LOCK_GUARD_SETTLE_S - 1e-9)
         )
 
     def reference_mps(self, obs: np.ndarray) -> np.ndarray:
@@ -740,7 +750,8 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         space) that track ``target_kmh`` (``(n_envs, n_valves)``, km/h of measured slip) on the
         kernel's observation ``obs``, on the state as ``advance`` left it; its one write is
         whether the loop works (``working``: some axle's own request, before the periodic
-        release's vents, under the full demand), which the next ``advance`` reads, so calling
+        release's vents and the lock guard's cap, under the full demand), which the next
+        ``advance`` reads, so calling
         it twice in a period with the same arguments changes nothing."""
         cfg, na = self.cfg, self.n_axles
         if self.scale_calibration:  # the scales ``advance`` read

@@ -143,11 +143,11 @@ def main(argv: list[str] | None = None) -> int:
     if any(sides) and not all(onsets):
         print("--onset-two-sided on: needs --onset-drift on (only)", file=sys.stderr)
         return 2
-    table, creep, floor = None, {}, 0.5
+    table, creep, creep_floor_kmh = None, {}, 0.5
     if args.teacher_table:
         try:
             table = config_teacher_table(args.teacher_table)
-            creep, floor = config_teacher_creep(args.teacher_table)
+            creep, creep_floor_kmh = config_teacher_creep(args.teacher_table)
         except ValueError as err:
             print(f"--teacher-table {err}", file=sys.stderr)
             return 2
@@ -180,7 +180,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.rail_teacher or table is not None:  # under each loop too (named where it is not
         # the default)
         for kw in loops:
-            own = None if table is None else SlipTargetTeacher(table, creep, floor)
+            own = None if table is None else SlipTargetTeacher(table, creep, creep_floor_kmh)
             teacher = SlipTargetOracle(own)
             teacher.loop = SlipTargetLoop(wsp, **kw)
             teacher.name += loop_suffix(teacher.loop)

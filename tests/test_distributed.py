@@ -5,6 +5,9 @@ its file in the workers, and recorded traces; bad worker arguments are one line.
 from __future__ import annotations
 
 import json
+import os
+import subprocess
+import sys
 
 import pytest
 
@@ -67,3 +70,22 @@ def test_bad_worker_arguments_are_one_line(tmp_path, capsys, argv, message):
     err = capsys.readouterr().err.strip()
     assert code == 2 and message in err and len(err.splitlines()) == 1
     assert not out.exists()
+
+
+def test_a_local_session_starts_its_own_ray_beside_another(local_ray):
+    """``ray_session`` without an address starts a new local Ray with its own CPU count, even
+    where another runs on the machine and ``RAY_ADDRESS`` names it (a process started from one
+    that ran Ray inherits that); Ray would otherwise attach and refuse the count ("When
+    connecting to an existing cluster, num_cpus and num_gpus must not be provided": the sweep's
+    resource check failed so under the suite, 2026-12-08)."""
+    address = local_ray.get_runtime_context().gcs_address
+    code = (
+        "from wsp_env.evaluation.distributed import ray_session\n"
+        "with ray_session(None, 1) as ray:\n"
+        "    print(ray.cluster_resources().get('CPU'))\n"
+    )
+    env = {**os.environ, "RAY_ADDRESS": address}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
+                         timeout=300, check=False)  # fmt: skip
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.strip().splitlines()[-1] == "1.0"

@@ -325,6 +325,40 @@ def test_rail_teachers_creep_schedule_follows_the_loops_reference():
     (plain,), _ = run_suite("uic_z1", suite, const, record="none")
     assert own["stopping_distance_m"] == ref["stopping_distance_m"]
     assert own["stopping_distance_m"] != plain["stopping_distance_m"]  # the schedule acted
+    assert sched.name == "oracle_target_rail_creepleaves0.015at0.5"
+
+
+@pytest.mark.parametrize(
+    ("creep", "words"),
+    [
+        ({"leaves": 0.0}, "pretrain.teacher_creep.leaves: must be > 0"),
+        ({"leaves": 1.5}, "pretrain.teacher_creep.leaves: must be <= 1"),
+        ({"sand": 0.01}, "pretrain.teacher_creep.sand: not a rail of pretrain.teacher_targets_kmh"),
+        ({"leaves": "x"}, "pretrain.teacher_creep.leaves: expected a number"),
+        (None, "pretrain.teacher_creep: needs pretrain.teacher_targets_kmh"),
+    ],
+)
+def test_a_bad_teacher_creep_is_one_line(creep, words):
+    """``pretrain.teacher_creep``: each value in (0, 1], only rails of the table, only beside a
+    table; every refusal one line naming the field."""
+    import copy
+    from pathlib import Path
+
+    import yaml
+
+    from wsp_env.core.config import ConfigError
+    from wsp_env.training.config import parse_train_config
+
+    root = Path(__file__).resolve().parents[1] / "configs" / "train"
+    data = yaml.safe_load((root / "ppo_bc_slip_target_guard_accel_regiolis.yaml").read_text())
+    data = copy.deepcopy(data)
+    if creep is None:
+        del data["pretrain"]["teacher_targets_kmh"]
+    else:
+        data["pretrain"]["teacher_creep"] = creep
+    with pytest.raises(ConfigError) as err:
+        parse_train_config(data, "c.yaml")
+    assert words in str(err.value) and len(str(err.value).splitlines()) == 1
 
 
 def test_slip_target_student_is_the_imitation_start_handed_over(tmp_path):

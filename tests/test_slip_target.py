@@ -24,6 +24,7 @@ from test_train import train_config
 from wsp_env.baselines.classical import ClassicalWSP, WSPConfig, load_wsp_config
 from wsp_env.baselines.slip_target import (
     CAL_MIN_SPEED_MPS,
+    LOCK_GUARD_DECEL_MPS2,
     LOCK_GUARD_FRACTION,
     MAX_CREEP_FLOOR_KMH,
     ONSET_MIN_S,
@@ -554,10 +555,12 @@ def test_the_release_gate_reads_the_loops_request_and_the_working_band():
     assert loop.vent[0, na - 1]  # the last axle first
 
 
-def test_slip_target_vector_env_state_round_trip_is_bit_for_bit():
+@pytest.mark.parametrize("guard", [False, True])
+def test_slip_target_vector_env_state_round_trip_is_bit_for_bit(guard):
     """A checkpoint holds the loop's periodic release and the observed tail: restored, the
-    run goes on the same (memory features on too)."""
-    kw = {"num_envs": 3, "action_mode": "slip_target", "memory_features": True}
+    run goes on the same (memory features on too; with the lock guard, its state too)."""
+    kw = {"num_envs": 3, "action_mode": "slip_target", "memory_features": True,
+          "slip_target_lock_guard": guard}  # fmt: skip
     venv = WSPBrakingVectorEnv(**kw)
     venv.reset(seed=5, options={**SOAP, "speed_kmh": 60.0})
     rng = np.random.default_rng(0)
@@ -565,6 +568,9 @@ def test_slip_target_vector_env_state_round_trip_is_bit_for_bit():
     for a in actions[:300]:
         venv.step(a)
     state = venv.core.state_dict()
+    if guard:  # the guard's arrays are in the checkpoint (``ArrayState``)
+        names = {"guard_slipped", "guard_decel", "guard_time_s", "guard_on"}
+        assert names <= set(state["slip_target"]["loop"])
     first = [venv.step(a)[0] for a in actions[300:]]
     other = WSPBrakingVectorEnv(**kw)
     other.core.load_state_dict(state)
@@ -1291,3 +1297,41 @@ def test_the_lock_guard_caps_every_request_only_when_it_is_on():
     free, guarded = outs
     assert np.all(free == 1.0)
     assert np.allclose(guarded[0], 2.0 * LOCK_GUARD_FRACTION - 1.0) and np.all(guarded[1] == 1.0)
+
+
+def test_the_lock_guard_acts_only_below_its_speed_after_a_slip_on_a_slow_stop():
+    """``_guard``'s conditions, one at a time, on a loop bound to a 1-env core: no slip, a
+    deceleration average at or over 0.85 m/s^2, a reference at or over 15 km/h, or a stop under
+    6 s old each keep the guard off; all met, it is on; a reset clears it for that env only."""
+    core = make_core(2, vehicle="uic_z1", action_mode="slip_target", slip_target_lock_guard=True)
+    loop = core.loop
+    loop.reset(np.arange(2))
+    slow, fast = np.full(2, 10.0 / 3.6), np.full(2, 20.0 / 3.6)
+    gripping = np.repeat(slow[:, None], core.n_axles, axis=1)
+    slipping = gripping.copy()
+    slipping[:, 0] -= 3.0 / 3.6  # 3 km/h under the reference: beyond the working band
+    loop.decel_ref[:] = 0.4  # a leaves stop's fall
+    for _ in range(round(5.9 / loop.dt)):  # under 6 s: not yet
+        loop._guard(slow, gripping)
+    assert not loop.guard_on.any()
+    for _ in range(round(0.1 / loop.dt)):
+        loop._guard(slow, gripping)
+    assert loop.guard_time_s.min() >= 6.0 - 1e-9
+    assert not loop.guard_on.any()  # 6 s, a low average, below 15 km/h: but no slip yet
+    loop._guard(slow, slipping)
+    assert loop.guard_on.all()
+    loop._guard(fast, gripping + 10.0 / 3.6)  # at 20 km/h: off
+    assert not loop.guard_on.any()
+    loop._guard(slow, gripping)  # the slip is remembered for the stop
+    assert loop.guard_on.all()
+    loop.decel_ref[:] = 1.2  # a dry rail's fall: the average climbs over 0.85
+    for _ in range(round(4.0 / loop.dt)):
+        loop._guard(slow, gripping)
+    assert loop.guard_decel.min() >= LOCK_GUARD_DECEL_MPS2 and not loop.guard_on.any()
+    loop.decel_ref[:] = 0.4
+    for _ in range(round(6.0 / loop.dt)):
+        loop._guard(slow, gripping)
+    assert loop.guard_on.all()
+    loop.reset(np.array([0]))
+    assert not loop.guard_on[0] and loop.guard_on[1]
+    assert not loop.guard_slipped[0] and loop.guard_time_s[0] == 0.0

@@ -44,7 +44,8 @@ def require_ray() -> Any:
 @contextlib.contextmanager
 def ray_session(address: str | None = None, num_cpus: int | None = None) -> Iterator[Any]:
     """Ray for the duration of a ``with``: attached to ``address`` or started here with
-    ``num_cpus`` CPUs (quietly: warnings only on failure); shut down after if started here.
+    ``num_cpus`` CPUs, a new local instance even where another runs on the machine (quietly:
+    warnings only on failure); shut down after if started here.
     Already initialised (a caller's session): used as it is."""
     ray = require_ray()
     if ray.is_initialized():  # a caller's session (a test's, a notebook's): used as it is
@@ -63,8 +64,9 @@ def ray_session(address: str | None = None, num_cpus: int | None = None) -> Iter
     try:
         if address:
             ray.init(address=address, **kwargs)
-        else:
-            ray.init(num_cpus=num_cpus, **kwargs)
+        else:  # a new local instance: never a cluster someone else runs on this machine
+            # (Ray would attach to one it finds, and refuse the CPU count)
+            ray.init(address="local", num_cpus=num_cpus, **kwargs)
     except (ConnectionError, RuntimeError, ValueError) as err:
         where = f"--address {address}" if address else "a local Ray"
         first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__

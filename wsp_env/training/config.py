@@ -197,10 +197,10 @@ def config_teacher_creep(path: str | Path) -> tuple[dict[str, float], float]:
     """The rail teacher's creep schedules of the training config at ``path``
     (``pretrain.teacher_creep``, rail -> creep; empty where it has none) and their floor
     (``pretrain.teacher_creep_floor_kmh``), checked as ``load_train_config`` checks them."""
+    from wsp_env.training.imitation import PretrainConfig
+
     cfg = load_train_config(path)
-    pre = cfg.pretrain
-    if pre is None:
-        return {}, 0.5
+    pre = cfg.pretrain if cfg.pretrain is not None else PretrainConfig()
     return dict(pre.teacher_creep or {}), float(pre.teacher_creep_floor_kmh)
 
 

@@ -137,6 +137,7 @@ def input_spec(policy: SB3Policy) -> dict[str, Any]:
         DRIFT_MIN_SPAN_S,
         LOCK_GUARD_DECEL_MPS2,
         LOCK_GUARD_FRACTION,
+        LOCK_GUARD_SETTLE_S,
         LOCK_GUARD_SPEED_KMH,
         LOCK_GUARD_TAU_S,
         ONSET_MIN_S,
@@ -238,13 +239,15 @@ def input_spec(policy: SB3Policy) -> dict[str, Any]:
             "cal_min_speed_kmh": CAL_MIN_SPEED_MPS * 3.6,
             "cal_max_factor": CAL_MAX_FACTOR,
             # below lock_guard_speed_kmh, on a stop where a wheel slipped beyond the working
-            # band and the reference's fall, averaged first-order over lock_guard_tau_s, is
-            # under lock_guard_decel_mps2: every request at most lock_guard_fraction
+            # band and the reference's fall, averaged first-order over lock_guard_tau_s from 0
+            # at the stop's start, is under lock_guard_decel_mps2, from lock_guard_settle_s into
+            # the stop: every request at most lock_guard_fraction
             "lock_guard": loop.lock_guard,
             "lock_guard_speed_kmh": LOCK_GUARD_SPEED_KMH,
             "lock_guard_fraction": LOCK_GUARD_FRACTION,
             "lock_guard_decel_mps2": LOCK_GUARD_DECEL_MPS2,
             "lock_guard_tau_s": LOCK_GUARD_TAU_S,
+            "lock_guard_settle_s": LOCK_GUARD_SETTLE_S,
             "tier": tier,
             "wsp": dataclasses.asdict(loop.cfg),
         }
