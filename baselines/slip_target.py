@@ -119,11 +119,12 @@ what the sensor model measures) — exactly as the classical WSP (``classical.py
 * **the lock guard** (``lock_guard``; off by default): on a patchy leaves rail at low speed a
   wheel braked at the full demand on a clean patch locks within two periods when it meets a
   contaminated one, and stays locked while its cylinder vents (0.32 s from 3.8 bar on the
-  Régiolis: the longest locks of every controller there). Below 15 km/h, on a stop whose
-  reference has slowed at under 0.85 m/s^2 on average after a wheel slipped, each request is
-  capped at 0.8 of the demand (``_guard``): the Régiolis student's longest lock on its
-  development stops 0.32 → 0.28 s for 0.0007 of its mean stop ratio (``docs/training_log.md``,
-  "The lock guard, and a creep schedule for the Régiolis's leaves teacher").
+  Régiolis: the event behind the longest locks of the classical WSP and the students there).
+  Below 15 km/h, on a stop whose reference has slowed at under 0.85 m/s^2 on average after a
+  wheel slipped (and 6 s or more into the stop), each request is capped at 0.8 of the demand
+  (``_guard``): the Régiolis student's longest lock on its development stops 0.32 → 0.28 s for
+  0.0007 of its mean stop ratio (``docs/training_log.md``, "The lock guard, and a creep
+  schedule for the Régiolis's leaves teacher").
 
 The commands are continuous valve actions (``2 f - 1``), so the loop can drive any continuous
 environment from outside (``SlipTargetPolicy``: a constant target) and gives, bit for bit, the
@@ -721,8 +722,9 @@ class SlipTargetLoop(ArrayState, PeriodicRelease):
         ``LOCK_GUARD_TAU_S`` of the period's fall, ``decel_ref``, from 0 at the stop's start,
         so only after ``LOCK_GUARD_SETTLE_S``), ``command`` asks for at most
         ``LOCK_GUARD_FRACTION`` of the demand; never below the minimum speed, where the full
-        demand is the rule. The threshold is absolute, chosen on the Régiolis at the full and
-        the service demand (a dry or wet rail's stops read 1 m/s^2 and more there)."""
+        demand is the rule. The threshold is absolute, chosen on the Régiolis (its dry, wet and
+        ``soap_etr1000`` stops traced read 0.99-1.04 m/s^2 at 15 km/h, its leaves and oil
+        stops 0.29-0.82)."""
         self.guard_slipped |= self._slips(v_ref, v)
         self.guard_decel += (self.dt / LOCK_GUARD_TAU_S) * (self.decel_ref - self.guard_decel)
         self.guard_time_s += self.dt

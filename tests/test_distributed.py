@@ -74,10 +74,11 @@ def test_bad_worker_arguments_are_one_line(tmp_path, capsys, argv, message):
 
 def test_a_local_session_starts_its_own_ray_beside_another(local_ray):
     """``ray_session`` without an address starts a new local Ray with its own CPU count, even
-    where another runs on the machine and ``RAY_ADDRESS`` names it (a process started from one
-    that ran Ray inherits that); Ray would otherwise attach and refuse the count ("When
-    connecting to an existing cluster, num_cpus and num_gpus must not be provided": the sweep's
-    resource check failed so under the suite, 2026-12-08)."""
+    where another runs on the machine and ``RAY_ADDRESS`` names it. Ray would otherwise attach
+    to it and refuse the count ("When connecting to an existing cluster, num_cpus and num_gpus
+    must not be provided"), as it does to a head started apart with ``ray start`` (checked by
+    hand: the same message): the suite's sweep bad-input case failed so on 2026-12-08 while
+    ``test_sweep``'s attach test, on another worker, had its head up."""
     address = local_ray.get_runtime_context().gcs_address
     code = (
         "from wsp_env.evaluation.distributed import ray_session\n"
