@@ -314,6 +314,14 @@ def test_rail_teachers_creep_schedule_follows_the_loops_reference():
     v_loop = core.loop.reference_mps(core.obs[:, : core.kernel_obs_dim])
     assert np.array_equal(v_loop, core.loop.v_ref) and v_loop[1] > 0.0
     assert np.allclose(teacher.targets_kmh()[1], min(2.0, 0.015 * 3.6 * v_loop[1]))
+    # without the drift correction the reference is the estimator's observed one, on the
+    # calibrated scale (the factors are 1 until the onset window closes)
+    plain = make_core(1, vehicle="uic_z1", action_mode="slip_target", accelerometer=True,
+                      slip_target_scale_calibration=True)  # fmt: skip
+    plain.reset_env(0, {"rail": "leaves", "speed_kmh": 60.0})
+    kobs = plain.obs[:, : plain.kernel_obs_dim]
+    want = kobs[:, 4 * plain.n_axles + 1].astype(np.float64) * plain.loop.v_scale
+    assert np.array_equal(plain.loop.reference_mps(kobs), want) and want[0] > 15.0
     case = CaseConfig(name="leaves", rail="leaves", mu_contaminated=0.05, pattern="uniform",
                       speeds_kmh=("60",))  # fmt: skip
     suite = SuiteConfig(name="t", description="", seeds=(3,), cases=(case,))
